@@ -1,0 +1,1 @@
+"""File input/output: atomic writes, CODE V sequence files."""

@@ -1,0 +1,102 @@
+"""Surface profiles (seed S2.1.3–S2.1.4): sag, its slope, normals and diffractive phase gradients.
+
+All profiles are functions of ``u = r² = x² + y²`` so that nothing divides by ``r`` (stable at the
+vertex, r = 0). Units: lengths in mm, curvature in 1/mm, phase in radians.
+
+Sag (S31, S33)::
+
+    z(u) = c u / (1 + sqrt(1 − (1 + κ) c² u)) + Σ_i a_{2i} u^i        (i = 2, 3, …)
+
+defined where ``1 − (1 + κ) c² u ≥ 0`` (everywhere when κ ≤ −1 or c = 0).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+__all__ = ["sag", "phase_slope", "normal_from_slope", "sag_domain"]
+
+
+def sag_domain(u: Tensor, c: Tensor, k: Tensor) -> Tensor:
+    """``1 − (1 + κ) c² u``: the sag is defined where this is ≥ 0.
+
+    Args:
+        u: (*) squared radial coordinate r², mm².
+        c: () or broadcastable, curvature 1/mm.
+        k: () or broadcastable, conic constant.
+    """
+    return 1.0 - (1.0 + k) * c * c * u
+
+
+def sag(u: Tensor, c: Tensor, k: Tensor, asphere: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
+    """Sag ``z(u)``, its slope ``dz/du`` and the definition mask, with finite values everywhere.
+
+    Args:
+        u: (*) squared radial coordinate r², mm².
+        c: curvature 1/mm, broadcastable to ``u``.
+        k: conic constant, broadcastable to ``u``.
+        asphere: (A,) even-asphere coefficients ``a4, a6, …, a_{2A+2}`` (mm^(1−2i)), or None.
+
+    Returns:
+        z: (*) sag in mm (placeholder value where undefined).
+        dz_du: (*) slope with respect to u, 1/mm.
+        defined: (*) bool, False where the conic square root would be negative.
+    """
+    q = sag_domain(u, c, k)
+    defined = q >= 0
+    # The square root never sees an argument below machine epsilon, so neither values nor
+    # gradients become NaN or infinite on undefined rows or exactly at an ellipsoid's rim.
+    floor = torch.finfo(u.dtype).eps
+    root = torch.sqrt(torch.where(q > floor, q, torch.full_like(q, floor)))
+    z = c * u / (1.0 + root)
+    dz_du = c / (2.0 * root)
+    if asphere is not None and asphere.shape[-1] > 0:
+        z_a, dz_a = _even_polynomial(u, asphere, first_power=2)
+        z = z + z_a
+        dz_du = dz_du + dz_a
+    return z, dz_du, defined
+
+
+def phase_slope(u: Tensor, phase: Tensor) -> Tensor:
+    """``dφ/du`` of the diffractive phase ``φ(r) = Σ_i d_{2i} r^{2i}`` (S35), i = 1, 2, ….
+
+    Using ``dφ/du`` instead of ``dφ/dr`` keeps the phase gradient finite at r = 0 (S16–S17):
+    ``∇φ = 2 (dφ/du) (x, y)``.
+
+    Args:
+        u: (*) r² in mm².
+        phase: (D,) coefficients ``d2, d4, …`` in rad/mm^(2i).
+    """
+    _, slope = _even_polynomial(u, phase, first_power=1)
+    return slope
+
+
+def normal_from_slope(xy: Tensor, dz_du: Tensor) -> Tensor:
+    """Unit surface normal ``∝ (−∂z/∂x, −∂z/∂y, 1)`` (S14), oriented towards +z.
+
+    Args:
+        xy: (*, 2) transverse coordinates, mm.
+        dz_du: (*) sag slope with respect to u = r².
+
+    Returns:
+        (*, 3) unit normals.
+    """
+    g = -2.0 * dz_du.unsqueeze(-1) * xy
+    n = torch.cat([g, torch.ones_like(dz_du).unsqueeze(-1)], dim=-1)
+    return n / torch.linalg.vector_norm(n, dim=-1, keepdim=True)
+
+
+def _even_polynomial(u: Tensor, coeffs: Tensor, first_power: int) -> tuple[Tensor, Tensor]:
+    """``p(u) = Σ_j coeffs[j] u^(first_power + j)`` and ``dp/du`` by Horner's scheme."""
+    n = coeffs.shape[-1]
+    # Horner on q(u) = Σ_j coeffs[j] u^j, then p = u^first_power q, p' = u^(fp−1)(fp q + u q').
+    q = torch.zeros_like(u)
+    dq = torch.zeros_like(u)
+    for j in range(n - 1, -1, -1):
+        dq = dq * u + q
+        q = q * u + coeffs[..., j]
+    upow = u ** (first_power - 1) if first_power > 1 else torch.ones_like(u)
+    value = upow * u * q
+    slope = upow * (first_power * q + u * dq)
+    return value, slope

@@ -1,0 +1,114 @@
+"""Spec → tensors: the one builder that turns a validated ``LensSpec`` into a ``Lens`` and ``System``
+(DESIGN.md rule 5: units converted here, once — nm → µm, radii → curvatures)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from lensopt.errors import LensoptError
+from lensopt.materials import Material, ModelGlass, material_from_name
+from lensopt.optics.lens import Lens, SurfaceShape, System
+from lensopt.spec.models import DiffractiveSurface, LensSpec, ModelGlassSpec, curvature_of
+
+__all__ = ["Model", "build", "resolve_material"]
+
+
+@dataclass(frozen=True)
+class Model:
+    """A built lens: tensors for the trace, the system, and the materials of every medium.
+
+    Attributes:
+        lens: the traced lens.
+        system: aperture, field, object, weights.
+        media: (S+1) materials: object space, then the medium after every surface.
+        spec: the spec it was built from.
+    """
+
+    lens: Lens
+    system: System
+    media: tuple[Material, ...]
+    spec: LensSpec
+
+
+def resolve_material(value: str | ModelGlassSpec, *, path: str) -> Material:
+    """Material object for a spec's ``material`` value; errors name ``path``."""
+    try:
+        if isinstance(value, ModelGlassSpec):
+            return ModelGlass(value.nd, value.vd, value.dpgf, name=value.name)
+        return material_from_name(value)
+    except LensoptError as err:
+        raise err.at(path) from None
+
+
+def build(spec: LensSpec, *, dtype: torch.dtype = torch.float64, device: torch.device | None = None) -> Model:
+    """Build the traced lens. Raises ``SpecError``/``MaterialError`` naming the field on bad input."""
+    opts = {"dtype": dtype, "device": device}
+    wavelengths_um = [w * 1e-3 for w in spec.spectrum.wavelengths_nm]
+    media: list[Material] = [material_from_name("air")]
+    for i, surf in enumerate(spec.surfaces):
+        path = f"surfaces[{i}].material"
+        mat = resolve_material(surf.material, path=path)
+        mat.check_wavelengths(wavelengths_um, path=path)
+        media.append(mat)
+    wl = torch.tensor(wavelengths_um, **opts)
+    index = torch.stack([m.index(wl) for m in media])
+
+    shapes, curv, conic, asph, phase = [], [], [], [], []
+    for surf in spec.surfaces:
+        base = surf.base if isinstance(surf, DiffractiveSurface) else surf
+        shapes.append(
+            SurfaceShape(
+                kind=base.type,
+                diffractive=isinstance(surf, DiffractiveSurface),
+                order=surf.order if isinstance(surf, DiffractiveSurface) else 1,
+                design_wavelength_um=(surf.design_wavelength_nm * 1e-3
+                                      if isinstance(surf, DiffractiveSurface) else None),
+                clip=surf.clip,
+            )
+        )
+        curv.append(curvature_of(base))
+        conic.append(getattr(base, "conic", 0.0))
+        asph.append(getattr(base, "coefficients", {}))
+        phase.append(surf.phase if isinstance(surf, DiffractiveSurface) else {})
+    thickness = [s.thickness for s in spec.surfaces]
+    thickness[-1] += spec.image.defocus
+    lens = Lens(
+        shapes=tuple(shapes),
+        curvature=torch.tensor(curv, **opts),
+        conic=torch.tensor(conic, **opts),
+        asphere=_coefficient_table(asph, first_power=4, **opts),
+        phase=_coefficient_table(phase, first_power=2, **opts),
+        thickness=torch.tensor(thickness, **opts),
+        index=index,
+        wavelength_um=wl,
+        semi_diameter=torch.tensor([s.semi_diameter or 0.0 for s in spec.surfaces], **opts),
+        stop=spec.stop_index,
+    )
+    sysm = spec.system
+    fld = sysm.field
+    system = System(
+        epd=sysm.aperture.epd,
+        fnumber=sysm.aperture.fnumber,
+        field_type="angle" if fld.hfov_deg is not None else "image_height",
+        field_max=fld.hfov_deg if fld.hfov_deg is not None else fld.image_height,
+        rel_field=tuple(fld.relative),
+        object_distance=None if sysm.object == "infinity" else sysm.object.distance,
+        wavelength_weights=torch.tensor(spec.spectrum.weights_or_uniform, **opts),
+        reference=spec.spectrum.reference_index,
+        aim=sysm.aim,
+        field_weights=tuple(fld.weights) if fld.weights is not None else (),
+    )
+    return Model(lens=lens, system=system, media=tuple(media), spec=spec)
+
+
+def _coefficient_table(rows: list[dict[int, float]], *, first_power: int, dtype, device) -> torch.Tensor:
+    """(S, K) table of even-power coefficients; column j holds power ``first_power + 2j``."""
+    top = max((max(r) for r in rows if r), default=first_power - 2)
+    width = (top - first_power) // 2 + 1
+    table = torch.zeros(len(rows), max(width, 0), dtype=dtype, device=device)
+    for i, r in enumerate(rows):
+        for power, value in r.items():
+            table[i, (power - first_power) // 2] = value
+    return table

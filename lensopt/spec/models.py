@@ -1,0 +1,355 @@
+"""The lens spec: pydantic models shared by the TOML spec a person writes and the JSON lens lensopt
+writes (one schema, two serializations). Units are those a designer uses: mm, nm, degrees.
+
+Surface kinds are a discriminated union on ``type``. Every field that an optimizer may vary can be
+named in the surface's ``vary`` list (checked here, used by ``lensopt optimize``).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+__all__ = [
+    "ApertureSpec",
+    "FieldSpec",
+    "ObjectSpec",
+    "SystemSpec",
+    "SpectrumSpec",
+    "SensorSpec",
+    "ModelGlassSpec",
+    "PlaneShape",
+    "SphereShape",
+    "ConicShape",
+    "AsphereShape",
+    "BaseShape",
+    "PlaneSurface",
+    "SphereSurface",
+    "ConicSurface",
+    "AsphereSurface",
+    "DiffractiveSurface",
+    "SurfaceSpec",
+    "ImageSpec",
+    "LensSpec",
+    "curvature_of",
+]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, ser_json_inf_nan="constants")
+
+
+# --------------------------------------------------------------------------------------- system
+
+
+class ApertureSpec(_Model):
+    """Exactly one of: entrance pupil diameter (mm) or paraxial f-number (EFL/EPD)."""
+
+    epd: float | None = Field(default=None, gt=0)
+    fnumber: float | None = Field(default=None, gt=0)
+
+    @model_validator(mode="after")
+    def _exactly_one(self) -> ApertureSpec:
+        if (self.epd is None) == (self.fnumber is None):
+            raise ValueError("give exactly one of epd (mm) or fnumber")
+        return self
+
+
+class FieldSpec(_Model):
+    """Half field angle in degrees (object space) or paraxial image height in mm, with relative
+    field samples u_h in [0, 1] and optional field weights (for the effective spot radius)."""
+
+    hfov_deg: float | None = Field(default=None, gt=0, lt=90)
+    image_height: float | None = Field(default=None, gt=0)
+    relative: list[float] = Field(default_factory=lambda: [0.0, 0.7, 1.0], min_length=1)
+    weights: list[float] | None = None
+
+    @field_validator("relative")
+    @classmethod
+    def _relative_range(cls, v: list[float]) -> list[float]:
+        for x in v:
+            if not 0.0 <= x <= 1.0:
+                raise ValueError(f"relative fields must lie in [0, 1] (got {x})")
+        return v
+
+    @model_validator(mode="after")
+    def _exactly_one(self) -> FieldSpec:
+        if (self.hfov_deg is None) == (self.image_height is None):
+            raise ValueError("give exactly one of hfov_deg or image_height")
+        if self.weights is not None:
+            if len(self.weights) != len(self.relative):
+                raise ValueError(f"weights needs one entry per relative field ({len(self.relative)})")
+            if any(w < 0 for w in self.weights) or sum(self.weights) <= 0:
+                raise ValueError("weights must be non-negative with a positive sum")
+        return self
+
+
+class ObjectSpec(_Model):
+    """Object at a finite distance (mm) before the first surface; ``"infinity"`` in the spec otherwise."""
+
+    distance: float = Field(gt=0)
+
+
+class SystemSpec(_Model):
+    aperture: ApertureSpec
+    field: FieldSpec
+    object: ObjectSpec | Literal["infinity"] = "infinity"
+    aim: Literal["none", "chief"] = "none"
+
+
+class SpectrumSpec(_Model):
+    """Wavelengths (nm) with spectral weights, the reference wavelength (first-order data, solves) and
+    an optional wavelength→RGB weight matrix (n_w rows × 3 columns, each column summing to 1)."""
+
+    wavelengths_nm: list[float] = Field(min_length=1)
+    weights: list[float] | None = None
+    reference_nm: float | None = None
+    rgb_weights: list[list[float]] | None = None
+
+    @field_validator("wavelengths_nm")
+    @classmethod
+    def _positive(cls, v: list[float]) -> list[float]:
+        for x in v:
+            if not (x > 0 and math.isfinite(x)):
+                raise ValueError(f"wavelengths must be positive (got {x})")
+        if len(set(v)) != len(v):
+            raise ValueError("wavelengths must be distinct")
+        return v
+
+    @model_validator(mode="after")
+    def _consistent(self) -> SpectrumSpec:
+        n = len(self.wavelengths_nm)
+        if self.weights is not None:
+            if len(self.weights) != n:
+                raise ValueError(f"weights needs one entry per wavelength ({n}, got {len(self.weights)})")
+            if any(w < 0 for w in self.weights) or sum(self.weights) <= 0:
+                raise ValueError("weights must be non-negative with a positive sum")
+        if self.reference_nm is not None and self.reference_nm not in self.wavelengths_nm:
+            raise ValueError(f"reference_nm must be one of wavelengths_nm (got {self.reference_nm})")
+        if self.rgb_weights is not None:
+            if len(self.rgb_weights) != n or any(len(row) != 3 for row in self.rgb_weights):
+                raise ValueError(f"rgb_weights must be {n} rows of 3 (R, G, B) weights")
+            for col, name in enumerate("RGB"):
+                total = sum(row[col] for row in self.rgb_weights)
+                if abs(total - 1.0) > 1e-3:
+                    raise ValueError(f"rgb_weights column {name} must sum to 1 (got {total:.4f})")
+        return self
+
+    @property
+    def weights_or_uniform(self) -> list[float]:
+        return list(self.weights) if self.weights is not None else [1.0] * len(self.wavelengths_nm)
+
+    @property
+    def reference_index(self) -> int:
+        if self.reference_nm is None:
+            return (len(self.wavelengths_nm) - 1) // 2
+        return self.wavelengths_nm.index(self.reference_nm)
+
+
+class SensorSpec(_Model):
+    pixel_pitch_um: float = Field(gt=0)
+    resolution: tuple[int, int] | None = None
+
+    @field_validator("resolution")
+    @classmethod
+    def _res(cls, v: tuple[int, int] | None) -> tuple[int, int] | None:
+        if v is not None and (v[0] < 1 or v[1] < 1):
+            raise ValueError(f"resolution must be two positive pixel counts (got {v})")
+        return v
+
+
+# ------------------------------------------------------------------------------------ materials
+
+
+class ModelGlassSpec(_Model):
+    """A model glass dispersed by the Hartmann formula (S3–S7) from n_d, V_d and ΔP_g,F."""
+
+    nd: float = Field(gt=1.0, lt=3.0)
+    vd: float = Field(gt=5.0, lt=150.0)
+    dpgf: float = Field(default=0.0, ge=-0.1, le=0.1)
+    name: str | None = None
+
+
+MaterialSpec = Annotated[str | ModelGlassSpec, Field(union_mode="left_to_right")]
+
+
+# ------------------------------------------------------------------------------- surface shapes
+
+_RADIUS_DOC = "radius of curvature in mm (non-zero; inf for a flat base)"
+
+
+def _check_radius(v: float) -> float:
+    if v == 0 or math.isnan(v):
+        raise ValueError("must be non-zero (use inf or type = \"plane\" for a flat surface)")
+    return v
+
+
+def _check_even_powers(v: dict[int, float], first: int, what: str) -> dict[int, float]:
+    for p in v:
+        if p < first or p % 2:
+            raise ValueError(f"{what} keys must be even powers ≥ {first} (got {p})")
+    return dict(sorted(v.items()))
+
+
+class PlaneShape(_Model):
+    type: Literal["plane"]
+
+
+class _Curved(_Model):
+    radius: float = Field(description=_RADIUS_DOC)
+
+    @field_validator("radius")
+    @classmethod
+    def _nonzero(cls, v: float) -> float:
+        return _check_radius(v)
+
+
+class SphereShape(_Curved):
+    type: Literal["sphere"]
+
+
+class ConicShape(_Curved):
+    type: Literal["conic"]
+    conic: float = 0.0
+
+
+class AsphereShape(_Curved):
+    """Even asphere (S31, S33): conic base plus a4 r⁴ + a6 r⁶ + … (keys are the powers)."""
+
+    type: Literal["asphere"]
+    conic: float = 0.0
+    coefficients: dict[int, float] = Field(default_factory=dict)
+
+    @field_validator("coefficients")
+    @classmethod
+    def _powers(cls, v: dict[int, float]) -> dict[int, float]:
+        return _check_even_powers(v, 4, "coefficients")
+
+
+BaseShape = Annotated[PlaneShape | SphereShape | ConicShape | AsphereShape, Field(discriminator="type")]
+
+
+def curvature_of(shape: Any) -> float:
+    """Vertex curvature 1/R of a shape (0 for planes and infinite radii)."""
+    radius = getattr(shape, "radius", math.inf)
+    return 0.0 if math.isinf(radius) else 1.0 / radius
+
+
+# ------------------------------------------------------------------------------------- surfaces
+
+_VARY_RE = re.compile(r"^(radius|thickness|conic|material|coefficients|phase)(\.\d+)?$")
+
+
+class _Interface(_Model):
+    """What every surface has: the gap after it, its medium, clear aperture, stop flag, variables."""
+
+    thickness: float
+    material: MaterialSpec = "air"
+    semi_diameter: float | None = Field(default=None, gt=0)
+    stop: bool = False
+    clip: bool = False
+    vary: list[str] = Field(default_factory=list)
+    label: str | None = None
+
+    def _allowed_vary(self) -> set[str]:
+        return {"thickness", "material"}
+
+    @model_validator(mode="after")
+    def _check_vary(self) -> _Interface:
+        allowed = self._allowed_vary()
+        for item in self.vary:
+            m = _VARY_RE.match(item)
+            if not m or m.group(1) not in allowed or (m.group(2) and m.group(1) not in ("coefficients", "phase")):
+                raise ValueError(f"@vary: {item!r} is not a variable of this surface; allowed: "
+                                 + ", ".join(sorted(allowed)))
+        if self.clip and self.semi_diameter is None:
+            raise ValueError("@clip: clip = true needs a semi_diameter")
+        if not self.is_air and not self.thickness > 0:
+            raise ValueError(f"@thickness: a glass element needs a positive thickness (got {self.thickness})")
+        return self
+
+    @property
+    def is_air(self) -> bool:
+        return isinstance(self.material, str) and self.material.strip().lower() == "air"
+
+
+class PlaneSurface(_Interface, PlaneShape):
+    pass
+
+
+class SphereSurface(_Interface, SphereShape):
+    def _allowed_vary(self) -> set[str]:
+        return {"thickness", "material", "radius"}
+
+
+class ConicSurface(_Interface, ConicShape):
+    def _allowed_vary(self) -> set[str]:
+        return {"thickness", "material", "radius", "conic"}
+
+
+class AsphereSurface(_Interface, AsphereShape):
+    def _allowed_vary(self) -> set[str]:
+        return {"thickness", "material", "radius", "conic", "coefficients"}
+
+
+class DiffractiveSurface(_Interface):
+    """A phase profile φ(r) = Σ d_{2i} r^{2i} (radians, r in mm; S35) on a base shape, bending rays by
+    the generalized law of refraction (S15) into diffraction order ``order``. ``design_wavelength_nm``
+    is the construction wavelength (used when exporting, e.g. CODE V's HWL)."""
+
+    type: Literal["diffractive"]
+    base: BaseShape
+    phase: dict[int, float] = Field(default_factory=dict)
+    design_wavelength_nm: float = Field(gt=0)
+    order: int = 1
+
+    @field_validator("phase")
+    @classmethod
+    def _powers(cls, v: dict[int, float]) -> dict[int, float]:
+        return _check_even_powers(v, 2, "phase")
+
+    def _allowed_vary(self) -> set[str]:
+        allowed = {"thickness", "material", "phase"}
+        allowed |= {"radius"} if self.base.type != "plane" else set()
+        allowed |= {"conic"} if self.base.type in ("conic", "asphere") else set()
+        allowed |= {"coefficients"} if self.base.type == "asphere" else set()
+        return allowed
+
+
+SurfaceSpec = Annotated[
+    PlaneSurface | SphereSurface | ConicSurface | AsphereSurface | DiffractiveSurface,
+    Field(discriminator="type"),
+]
+
+
+class ImageSpec(_Model):
+    """The flat image surface after the last gap; ``defocus`` (mm) moves it along the axis."""
+
+    defocus: float = 0.0
+
+
+class LensSpec(_Model):
+    """A complete lens: system, spectrum, optional sensor, surfaces in order, image."""
+
+    name: str = "lens"
+    system: SystemSpec
+    spectrum: SpectrumSpec
+    sensor: SensorSpec | None = None
+    surfaces: list[SurfaceSpec] = Field(min_length=1)
+    image: ImageSpec = Field(default_factory=ImageSpec)
+
+    @model_validator(mode="after")
+    def _structure(self) -> LensSpec:
+        stops = [i for i, s in enumerate(self.surfaces) if s.stop]
+        if not stops:
+            raise ValueError("no surface has stop = true; mark the aperture stop")
+        if len(stops) > 1:
+            raise ValueError(f"stop = true on several surfaces ({stops}); exactly one is the aperture stop")
+        return self
+
+    @property
+    def stop_index(self) -> int:
+        return next(i for i, s in enumerate(self.surfaces) if s.stop)
