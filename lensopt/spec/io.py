@@ -85,7 +85,7 @@ def _to_spec_error(err: ValidationError) -> SpecError:
             msg = msg[len(prefix):]
     if msg.startswith("@"):  # validators may name a sub-field: "@thickness: ..."
         sub, _, msg = msg[1:].partition(": ")
-        loc = f"{loc}.{sub}" if loc else sub
+        loc = f"{loc}{'' if sub.startswith('[') else '.'}{sub}" if loc else sub
     got = first.get("input", ...)
     if first["type"] in ("missing", "model_type", "dict_type") or isinstance(got, dict | list) or "(got" in msg:
         got = ...

@@ -345,9 +345,10 @@ class LensSpec(_Model):
     def _structure(self) -> LensSpec:
         stops = [i for i, s in enumerate(self.surfaces) if s.stop]
         if not stops:
-            raise ValueError("no surface has stop = true; mark the aperture stop")
+            raise ValueError("@surfaces: no surface has stop = true; mark the aperture stop")
         if len(stops) > 1:
-            raise ValueError(f"stop = true on several surfaces ({stops}); exactly one is the aperture stop")
+            raise ValueError(f"@surfaces[{stops[1]}].stop: stop = true on several surfaces {stops}; "
+                             "exactly one is the aperture stop")
         return self
 
     @property
