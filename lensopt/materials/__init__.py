@@ -1,0 +1,56 @@
+"""Materials: dispersion models (catalog formulas, Hartmann from nd/vd/ΔPgF), vendor catalogs,
+design catalogs, and the runtime material objects a lens is built from (seed S1.1).
+
+Layers: :mod:`.dispersion` holds pure torch functions; :mod:`.catalog` the vendor data (lazy,
+cached) and name lookup; :mod:`.material` the small frozen objects the spec builder uses.
+"""
+
+from lensopt.materials.catalog import (
+    DESIGN_CATALOGS,
+    HARTMANN_RANGE_UM,
+    VENDORS,
+    DesignCatalog,
+    Glass,
+    design_catalog,
+    find_glass,
+    list_glasses,
+)
+from lensopt.materials.dispersion import (
+    CATALOG_FORMULAS,
+    HARTMANN_FORMULA,
+    LINE_C_UM,
+    LINE_D_UM,
+    LINE_F_UM,
+    LINE_G_UM,
+    catalog_index,
+    hartmann_coefficients,
+    hartmann_index,
+    normal_pgf,
+)
+from lensopt.materials.material import Air, CatalogGlass, Material, ModelGlass, material_from_name
+
+__all__ = [
+    "Air",
+    "CATALOG_FORMULAS",
+    "CatalogGlass",
+    "DESIGN_CATALOGS",
+    "DesignCatalog",
+    "Glass",
+    "HARTMANN_FORMULA",
+    "HARTMANN_RANGE_UM",
+    "LINE_C_UM",
+    "LINE_D_UM",
+    "LINE_F_UM",
+    "LINE_G_UM",
+    "Material",
+    "ModelGlass",
+    "VENDORS",
+    "catalog_index",
+    "design_catalog",
+    "find_glass",
+    "hartmann_coefficients",
+    "hartmann_index",
+    "list_glasses",
+    "material_from_name",
+    "normal_pgf",
+]
