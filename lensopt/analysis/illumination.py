@@ -1,0 +1,58 @@
+"""Relative illumination per field from image-space direction cosines (S51–S52).
+
+- ``three_ray``: Rimmer's estimate (S51) from the lateral (px = 1), inferior (py = −1) and superior
+  (py = +1) rays, ``R_h = |α_l,h| |β_i,h − β_s,h| / (2 β_s,0²)``, normalised so that R = 1 on axis.
+- ``std``: the all-ray estimate (S52), ``R_h = α_std,h β_std,h / (α_std,0 β_std,0)`` with the
+  wavelength-weighted standard deviations of the image-space direction cosines of every valid ray.
+
+The normalising field (subscript 0) is the bundle's field with the smallest relative field (the axis
+when the field list starts at 0, as it usually does).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from lensopt.analysis.spot import safe_sqrt
+from lensopt.optics.bundle import Bundle
+
+__all__ = ["relative_illumination_std", "relative_illumination_three_ray", "THREE_RAY_PUPIL"]
+
+THREE_RAY_PUPIL = ((1.0, 0.0), (0.0, -1.0), (0.0, 1.0))
+"""Relative pupil points of the lateral, inferior and superior rays, in this order."""
+
+
+def _reference_field(bundle: Bundle) -> int:
+    return int(torch.argmin(bundle.rel_field.detach()))
+
+
+def relative_illumination_std(bundle: Bundle, wavelength_weights: Tensor) -> Tensor:
+    """(F,) S52 estimate from every valid ray of a full bundle (batch F × W × P), differentiable."""
+    res = bundle.result
+    valid = res.valid
+    w = wavelength_weights.to(res.dir.dtype)[None, :, None] * valid.to(res.dir.dtype)
+    total = w.sum((1, 2)).clamp_min(torch.finfo(w.dtype).tiny)
+
+    def std(v: Tensor, zero_mean: bool) -> Tensor:
+        v = torch.where(valid, v, 0.0)
+        mean = torch.zeros_like(total) if zero_mean else (w * v).sum((1, 2)) / total
+        return safe_sqrt((w * (v - mean[:, None, None]) ** 2).sum((1, 2)) / total)
+
+    # With half-pupil sampling the x-mean of the full bundle is 0 by symmetry.
+    a_std = std(res.dir[..., 0], zero_mean=bundle.half_pupil)
+    b_std = std(res.dir[..., 1], zero_mean=False)
+    ref = _reference_field(bundle)
+    return a_std * b_std / (a_std[ref] * b_std[ref])
+
+
+def relative_illumination_three_ray(bundle: Bundle, wavelength: int) -> Tensor:
+    """(F,) S51 estimate from a bundle traced with the pupil points ``THREE_RAY_PUPIL`` (P = 3)
+    at wavelength index ``wavelength``; fields whose three rays do not all pass give 0."""
+    d = bundle.result.dir[:, wavelength]  # (F, 3, 3)
+    ok = bundle.result.valid[:, wavelength].all(-1)
+    alpha_l = d[:, 0, 0]
+    beta_i, beta_s = d[:, 1, 1], d[:, 2, 1]
+    ref = _reference_field(bundle)
+    r = alpha_l.abs() * (beta_i - beta_s).abs() / (2.0 * beta_s[ref] ** 2)
+    return torch.where(ok, r, torch.zeros_like(r))
