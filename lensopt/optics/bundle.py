@@ -16,6 +16,7 @@ from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import FirstOrder, field_tangents, first_order
 from lensopt.optics.sampling import launch
 from lensopt.optics.trace import Rays, RayTrace, trace
+from lensopt.optics.vignetting import apply_vignetting
 
 __all__ = ["Bundle", "trace_bundle"]
 
@@ -55,6 +56,7 @@ def trace_bundle(
     aim: str | None = None,
     record: bool = False,
     fo: FirstOrder | None = None,
+    vignetting: Tensor | None = None,
 ) -> Bundle:
     """Trace pupil points ``pupil`` ((P, 2) or (F, W, P, 2)) for every field and wavelength.
 
@@ -63,6 +65,8 @@ def trace_bundle(
         aim: ``none`` or ``chief``; default: the system's.
         record: keep per-surface hits (for constraints and layout plots).
         fo: precomputed first-order data (saves a paraxial trace).
+        vignetting: (F, W or 1, 3) factors (V_i, V_s, V_l) applied to the pupil (S19–S20); default:
+            the system's fixed factors when they match the fields, else none.
     """
     fo = first_order(lens, system) if fo is None else fo
     if rel_field is None:
@@ -73,6 +77,10 @@ def trace_bundle(
     pupil = pupil.to(lens.dtype)
     if pupil.dim() == 2:
         pupil = pupil.expand(rel_field.shape[0], lens.wavelength_um.shape[0], *pupil.shape)
+    if vignetting is None and system.vignetting and len(system.vignetting) == rel_field.shape[0]:
+        vignetting = torch.tensor(system.vignetting, dtype=lens.dtype, device=lens.device).unsqueeze(1)
+    if vignetting is not None:
+        pupil = apply_vignetting(pupil, vignetting)
     if mode == "chief":
         chief = aim_chief(lens, system, tan, epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z)
         shift = torch.stack([torch.zeros_like(chief.offset), chief.offset], -1).unsqueeze(-2)

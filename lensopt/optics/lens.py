@@ -107,6 +107,8 @@ class System:
         wavelength_weights: (W,) spectral weights W_w.
         reference: index of the reference wavelength.
         aim: ``none`` (fill the paraxial entrance pupil) or ``chief`` (chief ray through the stop centre).
+        field_weights: per-field weights for the effective spot radius (empty: uniform).
+        vignetting: fixed vignetting factors (V_i, V_s, V_l) per field (S19–S20), or empty.
     """
 
     epd: float | None
@@ -119,6 +121,7 @@ class System:
     reference: int
     aim: Literal["none", "chief"] = "none"
     field_weights: tuple[float, ...] = field(default=())
+    vignetting: tuple[tuple[float, float, float], ...] = field(default=())
 
     @property
     def num_fields(self) -> int:

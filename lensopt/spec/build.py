@@ -99,6 +99,8 @@ def build(spec: LensSpec, *, dtype: torch.dtype = torch.float64, device: torch.d
         reference=spec.spectrum.reference_index,
         aim=sysm.aim,
         field_weights=tuple(fld.weights) if fld.weights is not None else (),
+        vignetting=(tuple(zip(sysm.vignetting.inferior, sysm.vignetting.superior, sysm.vignetting.lateral,
+                              strict=True)) if sysm.vignetting is not None else ()),
     )
     return Model(lens=lens, system=system, media=tuple(media), spec=spec)
 

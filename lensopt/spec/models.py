@@ -18,6 +18,7 @@ __all__ = [
     "FieldSpec",
     "ObjectSpec",
     "SystemSpec",
+    "VignettingSpec",
     "SpectrumSpec",
     "SensorSpec",
     "ModelGlassSpec",
@@ -93,11 +94,38 @@ class ObjectSpec(_Model):
     distance: float = Field(gt=0)
 
 
+class VignettingSpec(_Model):
+    """Fixed vignetting factors per field (S19–S20; CODE V's VLY/VUY/VUX): the fraction of the lower
+    (inferior) and upper (superior) half and of each lateral half of the entrance pupil that is blocked."""
+
+    inferior: list[float]
+    superior: list[float]
+    lateral: list[float]
+
+    @model_validator(mode="after")
+    def _ranges(self) -> VignettingSpec:
+        for name in ("inferior", "superior", "lateral"):
+            for v in getattr(self, name):
+                if not -1.0 < v < 1.0:
+                    raise ValueError(f"@{name}: vignetting factors must lie in (−1, 1) (got {v})")
+        return self
+
+
 class SystemSpec(_Model):
     aperture: ApertureSpec
     field: FieldSpec
     object: ObjectSpec | Literal["infinity"] = "infinity"
     aim: Literal["none", "chief"] = "none"
+    vignetting: VignettingSpec | None = None
+
+    @model_validator(mode="after")
+    def _vignetting_per_field(self) -> SystemSpec:
+        if self.vignetting is not None:
+            n = len(self.field.relative)
+            for name in ("inferior", "superior", "lateral"):
+                if len(getattr(self.vignetting, name)) != n:
+                    raise ValueError(f"@vignetting.{name}: needs one factor per relative field ({n})")
+        return self
 
 
 class SpectrumSpec(_Model):
