@@ -150,6 +150,8 @@ def _num(v: float | None, fmt: str = ".4f") -> str:
 
 
 def _render_field(r: dict[str, Any]) -> None:
+    from lensopt.analysis.field import AIM_NOTE_FRACTION
+
     full = r["aim"] == "full"
     t = Table(title=f"Distortion, relative illumination, pupil (V factors at {r['reference_nm']:g} nm)"
                     + (f", full aiming {r['aim_steps']} step(s), stop radius {r['stop_radius_mm']:.6f} mm"
@@ -158,13 +160,15 @@ def _render_field(r: dict[str, Any]) -> None:
         t.add_column(col, justify="right")
     if full:
         t.add_column("stop miss µm", justify="right")
+        limit = 1e3 * AIM_NOTE_FRACTION * r["stop_radius_mm"]
     for f in r["fields"]:
         v = f["vignetting"]
         ri = f["relative_illumination"]
         row = [f"{f['angle_deg']:.3f}", _num(f["distortion_percent"]), _num(ri["three_ray"]), _num(ri["std"]),
                f"{v['inferior']:.4f}", f"{v['superior']:.4f}", f"{v['lateral']:.4f}"]
         if full:
-            row.append(f"{1e3 * max(v['aim_residual_mm'].values()):.2e}" + ("" if v["aim_converged"] else " (!)"))
+            miss = 1e3 * max(v["aim_residual_mm"].values())
+            row.append(f"{miss:.2e}" + ("" if v["aim_rays_traced"] and miss <= limit else " (!)"))
         t.add_row(*row)
     console.print(t)
     for note in r["notes"]:

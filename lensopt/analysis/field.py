@@ -26,10 +26,14 @@ from lensopt.optics.paraxial import field_tangents, first_order
 from lensopt.optics.sampling import PupilSampling
 from lensopt.optics.trace import REASONS, Status
 
-__all__ = ["FieldSummary", "field_summary", "field_notes", "RAY_NAMES"]
+__all__ = ["FieldSummary", "field_summary", "field_notes", "RAY_NAMES", "AIM_NOTE_FRACTION"]
 
 RAY_NAMES = ("inferior", "superior", "lateral", "chief")
 """The rays full aiming puts on the stop, in the order of ``PupilAim.residual_mm``."""
+
+AIM_NOTE_FRACTION = 0.01
+"""Aiming that leaves a stop miss above this fraction of the stop radius (or loses a ray) gets a note;
+smaller misses are the expected result of the seed's single step and only show in the residuals."""
 
 
 @dataclass(frozen=True)
@@ -154,12 +158,14 @@ def field_notes(lens: Lens, system: System, s: FieldSummary, bundle: Bundle, kee
             reasons = {REASONS[Status(r)]: int((st == r).sum()) for r in REASONS if (st == r).any()}
             notes.append(f"{where}: no ray reaches the image ({', '.join(f'{k}: {v}' for k, v in reasons.items())})")
         if s.aim_converged is not None and s.aim_residual_mm is not None and s.aim_traced is not None:
-            bad = [w for w in range(s.aim_converged.shape[1]) if not bool(s.aim_converged[h, w])]
+            limit = AIM_NOTE_FRACTION * (s.stop_radius_mm or 0.0)
+            bad = [w for w in range(s.aim_converged.shape[1])
+                   if not bool(s.aim_traced[h, w].all()) or float(s.aim_residual_mm[h, w].abs().max()) > limit]
             if bad:
                 lost = [name for k, name in enumerate(RAY_NAMES) if not bool(s.aim_traced[h, bad, k].all())]
                 res = float(s.aim_residual_mm[h, bad].abs().max())
                 why = (f"the {', '.join(lost)} ray(s) do not reach the stop; the chief-aimed circle is used" if lost
-                       else f"largest stop miss {res:.3g} mm")
+                       else f"largest stop miss {res:.3g} mm, over {100 * AIM_NOTE_FRACTION:g} % of the stop radius")
                 notes.append(f"{where}: full aiming not converged after {system.aim_steps} step(s) at "
                              f"{', '.join(f'{wl_nm[w]:g}' for w in bad)} nm ({why}; more --aim-steps may help)")
     if s.aim_converged is None and bundle.aim is not None:

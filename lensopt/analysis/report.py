@@ -57,6 +57,7 @@ def trace_report(
             pupil["aim_residual_mm"] = {k: float(res[i]) for i, k in enumerate(("inferior", "superior", "lateral",
                                                                                 "chief"))}
             pupil["aim_converged"] = bool(summary.aim_converged[h].all())
+            pupil["aim_rays_traced"] = bool(summary.aim_traced[h].all()) if summary.aim_traced is not None else False
         fields.append({
             "relative": system.rel_field[h],
             "angle_deg": math.degrees(math.atan(float(bundle.tan_field[h]))),
