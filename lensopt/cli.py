@@ -175,5 +175,45 @@ def ray(
     console.print(f"status: {r['status']}" + (" (backtracking flagged)" if r["backtracking"] else ""))
 
 
+# ----------------------------------------------------------------------------------------- codev
+
+OutputOpt = Annotated[Path, typer.Option("--output", "-o", help="Output file.")]
+
+
+@app.command("export-codev")
+@handle_errors
+def export_codev(
+    lens: LensArg,
+    output: OutputOpt,
+    private_catalog: Annotated[bool, typer.Option(
+        "--private-catalog", help="Write every glass as a private catalog of lensopt's indices.")] = False,
+) -> None:
+    """Write the lens as a CODE V sequence file (.seq)."""
+    from lensopt.io.codev_export import write_codev
+
+    write_codev(load_spec(lens), output, private_catalog=private_catalog)
+    err_console.print(f"wrote {output}", highlight=False)
+
+
+@app.command("import-codev")
+@handle_errors
+def import_codev(
+    seq: Annotated[Path, typer.Argument(help="CODE V sequence file (.seq).")],
+    output: OutputOpt,
+) -> None:
+    """Read a CODE V sequence file into a lensopt lens (.json)."""
+    from lensopt.io.codev_import import read_codev
+    from lensopt.spec.io import save_json
+
+    if output.suffix.lower() != ".json":
+        raise LensoptError("the imported lens is written as JSON; name it *.json", path="--output",
+                           got=str(output))
+    result = read_codev(seq)
+    for warning in result.warnings:
+        err_console.print(f"[yellow]warning:[/] {warning}", markup=True, highlight=False, soft_wrap=True)
+    save_json(result.spec, output)
+    err_console.print(f"wrote {output}", highlight=False)
+
+
 if __name__ == "__main__":  # pragma: no cover
     app()
