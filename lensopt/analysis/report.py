@@ -29,7 +29,9 @@ def trace_report(model: Model, sampling: PupilSampling, *, aim: str | None = Non
         fo = first_order(lens, system)
         bundle = trace_bundle(lens, system, sampling.points(dtype=lens.dtype), half_pupil=sampling.half,
                               aim=aim, fo=fo)
-        stats = spot_stats(bundle, system.wavelength_weights)
+        field_weights = (torch.tensor(system.field_weights, dtype=lens.dtype, device=lens.device)
+                         if system.field_weights else None)
+        stats = spot_stats(bundle, system.wavelength_weights, field_weights)
         chief = trace_bundle(lens, system, torch.zeros(1, 2, dtype=lens.dtype), aim=aim, fo=fo)
         sd = auto_semi_diameters(model, aim=aim)
     ref = system.reference

@@ -40,3 +40,19 @@ def test_ray_report_matches_bundle_at_every_wavelength(aperture, w, nm):
     for s, hit in enumerate(bundle.result.hits):
         p = hit.pos[0, w, 0]
         assert [r["surfaces"][s][k] for k in "xyz"] == pytest.approx(p.tolist(), abs=1e-12)
+
+
+def test_trace_report_esr_uses_the_spec_field_weights():
+    """ESR = sqrt(Σ w_h SR_h² / Σ w_h) (S4.2.1) with the spec's ``field.weights``; uniform without them.
+    Regression: ``trace_report`` used to ignore the weights."""
+    from lensopt.analysis.report import trace_report
+    from lensopt.optics.sampling import PupilSampling
+
+    sampling = PupilSampling.parse("rings:6")
+    plain = trace_report(cooke(), sampling)
+    sr = [f["rms_spot_radius_weighted_um"] for f in plain["fields"]]
+    assert plain["effective_spot_radius_um"] == pytest.approx((sum(v * v for v in sr) / 3) ** 0.5, rel=1e-12)
+    weighted = trace_report(cooke(field={"hfov_deg": 20.0, "relative": [0.0, 0.7, 1.0],
+                                         "weights": [1.0, 0.0, 3.0]}), sampling)
+    expected = ((sr[0] ** 2 + 3 * sr[2] ** 2) / 4) ** 0.5
+    assert weighted["effective_spot_radius_um"] == pytest.approx(expected, rel=1e-12)
