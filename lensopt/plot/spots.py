@@ -69,7 +69,8 @@ def plot_spots(spots: SpotDiagram, *, title: str | None = None, subtitle: str | 
             add_scale_bar(ax, bar, format_length_um(bar), x0=-0.92 * half, y0=-0.9 * half)
             failed, total = int((~spots.valid[f]).sum()), spots.valid[f].numel()
             lost = f"\n{failed} of {total} rays failed" if failed else ""
-            ax.set_title(f"{float(spots.field_deg[f]):.2f}°   ȳ = {centroid[f, 1]:.4f} mm\n"
+            ybar = f"{centroid[f, 1]:.4f}".replace("-0.0000", "0.0000")
+            ax.set_title(f"{float(spots.field_deg[f]):.2f}°   ȳ = {ybar} mm\n"
                          f"RMS radius {rms_um[f]:.3f} µm{lost}")
         handles = [Line2D([], [], ls="", marker="o", ms=5, color=wavelength_color(w), label=f"{w:g} nm")
                    for w in wl_nm]
