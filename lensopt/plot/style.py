@@ -16,7 +16,7 @@ from lensopt.io.files import atomic_path
 
 __all__ = ["wavelength_color", "field_color", "nice_length", "add_scale_bar", "save_figure", "new_figure"]
 
-#: Field colours of layouts (colour-blind-safe Okabe–Ito order: blue, vermillion, green, ...).
+#: Field colours of layouts (colour-blind-safe Okabe–Ito palette: blue, bluish green, vermillion, ...).
 FIELD_COLORS = ("#0072B2", "#009E73", "#D55E00", "#CC79A7", "#E69F00", "#56B4E9", "#000000", "#F0E442")
 
 RC = {
