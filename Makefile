@@ -17,13 +17,17 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q -e '.[dev,oracle]'
 	touch $(STAMP)
 
+DEMO_SPEC := specs/cooke_triplet.toml
+DEMO := out/cooke_triplet
+
 demo: install
 	mkdir -p out
-	$(VENV)/bin/lensopt trace specs/cooke_triplet.toml
-	$(VENV)/bin/lensopt trace specs/cooke_triplet.toml --json > out/cooke_triplet_trace.json
-	$(VENV)/bin/lensopt plot layout specs/cooke_triplet.toml -o out/cooke_triplet_layout.png
-	$(VENV)/bin/lensopt plot fans specs/cooke_triplet.toml -o out/cooke_triplet_fans.png
-	$(VENV)/bin/lensopt plot spots specs/cooke_triplet.toml -o out/cooke_triplet_spots.png
+	$(VENV)/bin/lensopt trace $(DEMO_SPEC)
+	$(VENV)/bin/lensopt trace $(DEMO_SPEC) --json > $(DEMO)_trace.json.part && mv $(DEMO)_trace.json.part $(DEMO)_trace.json
+	$(VENV)/bin/lensopt plot layout $(DEMO_SPEC) -o $(DEMO)_layout.png
+	$(VENV)/bin/lensopt plot fans $(DEMO_SPEC) -o $(DEMO)_fans.png
+	$(VENV)/bin/lensopt plot spots $(DEMO_SPEC) -o $(DEMO)_spots.png
+	@echo "demo outputs: $(DEMO)_trace.json $(DEMO)_layout.png $(DEMO)_fans.png $(DEMO)_spots.png"
 
 test: install
 	$(PY) -m pytest -q

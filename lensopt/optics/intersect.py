@@ -28,10 +28,7 @@ def intersect_quadric(pos: Tensor, dir: Tensor, c: Tensor, k: Tensor) -> tuple[T
     """Distance along the ray to the conic ``c(x² + y²) + c(1 + κ) z² − 2z = 0`` (plane when c = 0).
 
     Uses the root that tends to the plane intersection as c → 0 (the vertex side of the surface),
-    in the cancellation-free form ``t = C / (B + sign(B) sqrt(B² − aC))``, unless that root lies on
-    the far branch of the conic while the other one, ``(B + sign(B) sqrt(B² − aC)) / a``, lies on the
-    vertex branch: this happens when the ray starts behind the centre of curvature (c z > 1), e.g. on
-    an entrance pupil deep inside the lens.
+    in the cancellation-free form ``t = C / (B + sign(B) sqrt(B² − aC))``.
 
     Args:
         pos: (*, 3) ray positions relative to the surface vertex, mm.
@@ -54,15 +51,20 @@ def intersect_quadric(pos: Tensor, dir: Tensor, c: Tensor, k: Tensor) -> tuple[T
     root = torch.sqrt(torch.where(hit, disc, torch.zeros_like(disc)).clamp_min(torch.finfo(disc.dtype).tiny))
     sign = torch.where(b >= 0, torch.ones_like(b), -torch.ones_like(b))
     q = b + sign * root
-    eps = torch.finfo(q.dtype).eps
-    near = _safe_div(cc, q)
-    far = _safe_div(q, a)
+    t = _safe_div(cc, q)
+    hit = hit & (q.abs() > torch.finfo(q.dtype).eps)
     # The sag formula's branch satisfies (1 + κ) c z ≤ 1; the far side of a sphere/ellipsoid and the
     # second sheet of a hyperboloid do not.
-    near_ok = hit & (q.abs() > eps) & (rho * c * (pz + near * dz) <= 1.0)
-    far_ok = hit & (a.abs() > eps) & (rho * c * (pz + far * dz) <= 1.0)
-    t = torch.where(near_ok, near, far)
-    hit = near_ok | far_ok
+    on_sheet = rho * c * (pz + t * dz) <= 1.0
+    # The other root, q / a. C / q is the root continuous with the plane as c → 0, but when the ray
+    # starts beyond the centre of curvature (b < 0 with the ray going forward, e.g. rays launched
+    # on an entrance pupil that lies behind surface 1's centre) C / q is the far side of the sphere
+    # and the sag-branch crossing is q / a.
+    t_other = _safe_div(q, a)
+    other_ok = (a.abs() > torch.finfo(a.dtype).eps) & (rho * c * (pz + t_other * dz) <= 1.0)
+    use_other = hit & ~on_sheet & other_ok
+    t = torch.where(use_other, t_other, t)
+    hit = hit & (on_sheet | other_ok)
     return torch.where(hit, t, torch.zeros_like(t)), hit
 
 

@@ -197,7 +197,7 @@ class ModelGlassSpec(_Model):
     """A model glass dispersed by the Hartmann formula (S3–S7) from n_d, V_d and ΔP_g,F."""
 
     nd: float = Field(gt=1.0, lt=3.0)
-    vd: float = Field(gt=5.0, lt=150.0)
+    vd: float = Field(ge=10.0, le=120.0)
     dpgf: float = Field(default=0.0, ge=-0.1, le=0.1)
     name: str | None = None
 
