@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 TORCH_PIN := torch==2.13.0
 
-.PHONY: install demo test lint clean
+.PHONY: install demo test test-external lint clean
 
 install: $(STAMP)
 
@@ -31,6 +31,21 @@ demo: install
 
 test: install
 	$(PY) -m pytest -q
+
+# Optional: lensopt's CODE V export read back by rayoptics (Python >= 3.12, large install, no torch),
+# in its own venv. Set PY312 to a Python 3.12+ interpreter if python3.12 is not on the PATH.
+PY312 ?= $(shell command -v python3.12 || command -v python3.13)
+EXT_VENV := tests/external/.venv
+RAYOPTICS_PIN := rayoptics==0.9.10
+
+$(EXT_VENV)/.installed:
+	$(PY312) -m venv $(EXT_VENV)
+	$(EXT_VENV)/bin/python -m pip install -q --upgrade pip
+	$(EXT_VENV)/bin/python -m pip install -q $(RAYOPTICS_PIN)
+	touch $@
+
+test-external: install $(EXT_VENV)/.installed
+	$(PY) -m pytest -q -s tests/external/check_rayoptics.py
 
 lint: install
 	$(VENV)/bin/ruff check lensopt tests benchmarks
