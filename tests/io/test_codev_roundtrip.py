@@ -34,8 +34,14 @@ def _intercepts(spec: LensSpec) -> tuple[torch.Tensor, torch.Tensor]:
     return bundle.result.pos[..., :2], bundle.result.valid
 
 
+_ORIGINAL: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
+
+
 def _assert_same_trace(a: LensSpec, b: LensSpec) -> float:
-    pos_a, ok_a = _intercepts(a)
+    key = dump_json(a)
+    if key not in _ORIGINAL:  # the original's trace is shared by the tests of one lens
+        _ORIGINAL[key] = _intercepts(a)
+    pos_a, ok_a = _ORIGINAL[key]
     pos_b, ok_b = _intercepts(b)
     assert torch.equal(ok_a, ok_b), "the two lenses fail different rays"
     assert ok_a.any(), "no ray reaches the image"
