@@ -1,6 +1,7 @@
 """Read a CODE V sequence file into a lens spec (``lensopt import-codev``).
 
-Reads the subset ``export_codev`` writes plus: ``RDM N`` (curvatures), ``FNO``/``NA``/``NAO``,
+Reads the subset ``export_codev`` writes plus: ``RDM N`` (curvatures, also CODE V's default when a
+file has no ``RDM``), ``FNO``/``NA``/``NAO``,
 ``YOB``/``YIM``, ``DIM C``/``DIM I`` (converted to mm), fictitious glasses (``516800.641700``, six-digit
 codes: lensopt's Hartmann model glass with normal partial dispersion), private catalogs (exact at
 their wavelengths, a cubic spline between), ``SI`` defocus, surface commands qualified by ``Sk``.
@@ -77,7 +78,7 @@ class _Surface:
 @dataclass
 class _State:
     source: str
-    radius_mode: bool = True
+    radius_mode: bool = False  # CODE V's default without RDM: curvatures (as rayoptics reads them)
     scale: float = 1.0
     name: str = "lens"
     system: dict[str, tuple[Command, list[float]]] = field(default_factory=dict)

@@ -61,6 +61,16 @@ def test_curvature_mode_gives_the_same_lens() -> None:
     assert torch.allclose(_intercepts(a), _intercepts(b), rtol=0, atol=1e-12)
 
 
+def test_without_rdm_the_surface_lines_hold_curvatures() -> None:
+    # CODE V's default is curvature mode; rayoptics reads it so too (its hand-written test files
+    # singlet.seq and landscape_lens.seq have no RDM and give curvatures, e.g. "s 0.1 1 nbk7_schott").
+    text = _singlet().replace("RDM Y\n", "").replace("S 51.68", f"S {1 / 51.68!r}").replace(
+        "S -51.68", f"S {-1 / 51.68!r}").lower()
+    spec = import_codev(text).spec
+    assert spec.surfaces[0].radius == pytest.approx(51.68, rel=1e-15)
+    assert spec.surfaces[0].material == "schott:N-BK7"
+
+
 @pytest.mark.parametrize("name", ["asphere_plastic.toml", "hybrid_diffractive.toml", "finite_relay.toml"])
 def test_inches_scale_every_length(name: str) -> None:
     # The same numbers read as inches make the same lens 25.4× larger: asphere (mm^(1−p)) and HCO
