@@ -27,8 +27,11 @@ def _safe_div(num: Tensor, den: Tensor) -> Tensor:
 def intersect_quadric(pos: Tensor, dir: Tensor, c: Tensor, k: Tensor) -> tuple[Tensor, Tensor]:
     """Distance along the ray to the conic ``c(x² + y²) + c(1 + κ) z² − 2z = 0`` (plane when c = 0).
 
-    Uses the root that tends to the plane intersection as c → 0 (the vertex side of the surface),
-    in the cancellation-free form ``t = C / (B + sign(B) sqrt(B² − aC))``.
+    The ray is first carried to the vertex plane z = 0 (as in Spencer & Murty's procedure), then the
+    root that tends to the plane intersection as c → 0 (the vertex side of the surface) is taken, in
+    the cancellation-free form ``t = C / (B + sign(B) sqrt(B² − aC))``. Without the transfer, the
+    sign of B depends on where the ray starts: from more than |R| before the vertex (a ball lens, a
+    thick plano-convex lens) it picks the far root and the ray is wrongly reported as missed.
 
     Args:
         pos: (*, 3) ray positions relative to the surface vertex, mm.
@@ -41,7 +44,10 @@ def intersect_quadric(pos: Tensor, dir: Tensor, c: Tensor, k: Tensor) -> tuple[T
         hit: (*) bool, False where the ray misses or meets the other branch of the conic.
     """
     rho = 1.0 + k
-    px, py, pz = pos.unbind(-1)
+    # Transfer to the vertex plane (skipped for rays parallel to it, which keep their start point).
+    t0 = _safe_div(-pos[..., 2], dir[..., 2])
+    px, py, pz = (pos + t0.unsqueeze(-1) * dir).unbind(-1)
+    pz = torch.where(t0 == 0, pz, torch.zeros_like(pz))  # exactly on the plane after a transfer
     dx, dy, dz = dir.unbind(-1)
     a = c * (dx * dx + dy * dy + rho * dz * dz)
     b = dz - c * (px * dx + py * dy + rho * pz * dz)
@@ -57,7 +63,7 @@ def intersect_quadric(pos: Tensor, dir: Tensor, c: Tensor, k: Tensor) -> tuple[T
     # second sheet of a hyperboloid do not.
     z = pz + t * dz
     hit = hit & (rho * c * z <= 1.0)
-    return torch.where(hit, t, torch.zeros_like(t)), hit
+    return torch.where(hit, t0 + t, torch.zeros_like(t)), hit
 
 
 def intersect_asphere(
