@@ -89,8 +89,8 @@ def intersect_asphere(
         iterations: fixed number of Newton iterations.
 
     Returns:
-        t: (*) distance to the intersection, mm.
-        defined: (*) bool, False where the sag is undefined at the solution (ray misses).
+        t: (*) distance to the intersection, mm (0 where Newton did not converge).
+        defined: (*) bool, False where the sag is undefined at the last iterate (ray misses).
         converged: (*) bool, False where Newton did not reach the tolerance.
     """
     p0, d0 = pos.detach(), dir.detach()
@@ -101,16 +101,20 @@ def intersect_asphere(
     t = torch.where(hit, t_conic, t_plane)
     for _ in range(iterations):
         f, fp, _ = _residual(p0, d0, t, c0, k0, a0)
-        t = t - _safe_div(f, fp)
-    # Differentiable final step from the converged point.
-    t = t.detach()
-    f, fp, defined = _residual(pos, dir, t, c, k, asphere)
-    step = _safe_div(f, fp)
-    t_final = t - step
-    scale = 1.0 + pos.detach()[..., :2].abs().amax(-1) + t.abs()
+        t_next = t - _safe_div(f, fp)
+        # A step that overflows (iterates running away on a pathological sag, float32) is not taken.
+        t = torch.where(torch.isfinite(t_next), t_next, t)
+    f, _, defined = _residual(p0, d0, t, c0, k0, a0)
+    scale = 1.0 + p0[..., :2].abs().amax(-1) + t.abs()
     tol = 64.0 * torch.finfo(t.dtype).eps * scale
-    converged = (f.detach().abs() <= tol) & torch.isfinite(t)
-    return torch.where(converged, t_final, t), defined, converged
+    converged = f.abs() <= tol  # False where f is not finite
+    # Differentiable final step from the converged point. Rows that did not converge take it from
+    # t = 0 (the ray's own, finite start) and return 0: no far-away iterate feeds inf or NaN into
+    # values or gradients (0 · inf in a masked backward pass is NaN).
+    t = torch.where(converged, t, torch.zeros_like(t))
+    f, fp, _ = _residual(pos, dir, t, c, k, asphere)
+    t_final = t - _safe_div(f, fp)
+    return torch.where(converged, t_final, torch.zeros_like(t_final)), defined, converged
 
 
 def _residual(pos: Tensor, dir: Tensor, t: Tensor, c: Tensor, k: Tensor, asphere: Tensor):
