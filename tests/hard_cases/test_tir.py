@@ -63,6 +63,6 @@ def test_evanescent_diffraction_order() -> None:
     assert abs(r_crit - 2.6732) < 1e-4
     expected = int((heights > r_crit).sum())
     assert counts(result) == {"total internal reflection": expected}
-    # The surviving rays obey the grating law: direction y = −… no: + λ d2 y / π (outward for d2 > 0).
+    # The surviving rays obey the grating law: direction cosine M = λ d2 y / π (outward for d2 > 0).
     ok = result.valid
     torch.testing.assert_close(result.dir[ok, 1], 0.5876e-3 * d2 * heights[ok] / math.pi, rtol=0, atol=1e-15)
