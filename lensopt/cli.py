@@ -182,10 +182,14 @@ def ray(
     """One real ray, surface by surface: position, direction cosines, angles (like CODE V's RSI)."""
     from lensopt.analysis.report import ray_report
 
+    if not (math.isfinite(field) and abs(field) < 90.0):
+        raise LensoptError("must be a field angle in degrees, strictly between -90 and 90", path="--field", got=field)
+    if not all(math.isfinite(p) for p in pupil):
+        raise LensoptError("must be two finite relative pupil coordinates", path="--pupil", got=pupil)
     model = load_model(lens)
     if wavelength is None:
         wavelength = model.spec.spectrum.wavelengths_nm[model.system.reference]
-    if not wavelength > 0:
+    if not (math.isfinite(wavelength) and wavelength > 0):
         raise LensoptError("must be a positive wavelength in nm", path="--wavelength", got=wavelength)
     r = ray_report(model, field_deg=field, px=pupil[0], py=pupil[1], wavelength_nm=wavelength,
                    aim=check_aim(aim) or model.system.aim)
