@@ -1,0 +1,1 @@
+"""Matplotlib figures: they take analysis results and never trace by themselves."""
