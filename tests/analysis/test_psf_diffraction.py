@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from conftest import build_oval
 from scipy.special import j1
 
 from lensopt.analysis.psf_diffraction import airy_field, diffraction_heuristic, fft_convolve_same
@@ -82,7 +81,7 @@ def test_reference_psf_agrees_with_rays_where_aberrations_dominate() -> None:
 
     def moments(p: torch.Tensor) -> torch.Tensor:
         py, px = p.sum(-1), p.sum(-2)
-        my, mx = (py * c).sum(-1), (px * c).sum(-1)
+        my = (py * c).sum(-1)
         return torch.stack([my, ((py * (c - my[..., None]) ** 2).sum(-1)).sqrt(), ((px * c**2).sum(-1)).sqrt()], -1)
 
     mg, mr = moments(st.geometric[0]), moments(ref[0])
