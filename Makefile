@@ -24,6 +24,9 @@ demo: install
 	$(VENV)/bin/lensopt plot layout specs/cooke_triplet.toml -o out/cooke_triplet_layout.png
 	$(VENV)/bin/lensopt plot fans specs/cooke_triplet.toml -o out/cooke_triplet_fans.png
 	$(VENV)/bin/lensopt plot spots specs/cooke_triplet.toml -o out/cooke_triplet_spots.png
+	$(VENV)/bin/lensopt plot psf specs/cooke_triplet.toml -o out/cooke_triplet_psf.png --pitch-um 2 --sqrt
+	$(VENV)/bin/lensopt simulate specs/cooke_triplet.toml examples/images/coffee.png --region corner \
+		-o out/coffee_cooke_corner.png
 
 test: install
 	$(PY) -m pytest -q
