@@ -66,7 +66,7 @@ def overlap_add_convolve(
     psfs: Tensor,
     *,
     overlap: float = 0.25,
-    max_bytes: int = 512 * 2**20,
+    max_bytes: int = 128 * 2**20,
 ) -> Tensor:
     """Convolve ``image`` with a grid of PSFs.
 
