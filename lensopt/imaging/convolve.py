@@ -4,8 +4,9 @@ The image (C, H, W) is split into a W_g × H_g grid of patches; each patch is ex
 by half the overlap (OP × patch size), convolved (FFT) with its PSF, and the convolved patches are
 recombined as a pixel-wise weighted average with separable Hann ramps across the patch borders. The
 1D weights sum to exactly 1 everywhere, so a uniform image stays uniform and a single PSF gives plain
-convolution. Image borders are padded by reflection. Patches are processed in chunks whose FFT
-buffers stay under ``max_bytes``, so memory is bounded for large images.
+convolution. Image borders are padded by reflection, tile by tile (no padded copy of the whole image).
+Patches are processed in chunks whose FFT buffers stay under ``max_bytes``, so the memory beyond the
+input and output images is bounded for large images.
 """
 
 from __future__ import annotations
@@ -90,10 +91,7 @@ def overlap_add_convolve(
     pw = max(b - a for a, b in sup_x)
     fh = next_fast_len(ph + 2 * r, real=True)
     fw = next_fast_len(pw + 2 * r, real=True)
-    pad_h, pad_w = min(r, h - 1), min(r, w - 1)
-    padded = torch.nn.functional.pad(image.unsqueeze(0), (pad_w, pad_w, pad_h, pad_h), mode="reflect")[0]
-    if pad_h < r or pad_w < r:  # kernels larger than the image: zero beyond one reflection
-        padded = torch.nn.functional.pad(padded, (r - pad_w, r - pad_w, r - pad_h, r - pad_h))
+    whole = None  # the reflect-padded image, made only when a tile cannot be padded on its own
     out = torch.zeros_like(image)
     patches = [(i, j) for i in range(gh) for j in range(gw)]
     per_patch = c * fh * (fw // 2 + 1) * 8 * 3 + c * fh * fw * 4 * 2
@@ -103,7 +101,11 @@ def overlap_add_convolve(
         tiles = torch.zeros(len(group), c, ph + 2 * r, pw + 2 * r, dtype=image.dtype, device=image.device)
         for n, (i, j) in enumerate(group):
             (y0, y1), (x0, x1) = sup_y[i], sup_x[j]
-            tiles[n, :, : y1 - y0 + 2 * r, : x1 - x0 + 2 * r] = padded[:, y0:y1 + 2 * r, x0:x1 + 2 * r]
+            tile = _tile(image, y0 - r, y1 + r, x0 - r, x1 + r)
+            if tile is None:
+                whole = _reflect_pad(image, r) if whole is None else whole
+                tile = whole[:, y0:y1 + 2 * r, x0:x1 + 2 * r]
+            tiles[n, :, : y1 - y0 + 2 * r, : x1 - x0 + 2 * r] = tile
         kern = torch.stack([psfs[i, j] for i, j in group]).to(image.dtype)
         spec = torch.fft.rfft2(tiles, s=(fh, fw)) * torch.fft.rfft2(kern, s=(fh, fw))
         conv = torch.fft.irfft2(spec, s=(fh, fw))
@@ -115,3 +117,27 @@ def overlap_add_convolve(
             weight = wy[i, y0:y1, None] * wx[j, None, x0:x1]
             out[:, y0:y1, x0:x1] += valid * weight
     return out
+
+
+def _tile(image: Tensor, ya: int, yb: int, xa: int, xb: int) -> Tensor | None:
+    """Rows [ya, yb) and columns [xa, xb) of the image reflected at its borders, or None when one
+    reflection does not reach (a tile thinner than its padding)."""
+    _, h, w = image.shape
+    ca, cb, da, db = max(ya, 0), min(yb, h), max(xa, 0), min(xb, w)
+    pads = (da - xa, xb - db, ca - ya, yb - cb)
+    sub = image[:, ca:cb, da:db]
+    if max(pads[0], pads[1]) >= sub.shape[-1] or max(pads[2], pads[3]) >= sub.shape[-2]:
+        return None
+    if not any(pads):
+        return sub
+    return torch.nn.functional.pad(sub.unsqueeze(0), pads, mode="reflect")[0]
+
+
+def _reflect_pad(image: Tensor, r: int) -> Tensor:
+    """Reflect-pad by r on every side (zeros beyond one reflection when r ≥ the image size)."""
+    _, h, w = image.shape
+    pad_h, pad_w = min(r, h - 1), min(r, w - 1)
+    padded = torch.nn.functional.pad(image.unsqueeze(0), (pad_w, pad_w, pad_h, pad_h), mode="reflect")[0]
+    if pad_h < r or pad_w < r:
+        padded = torch.nn.functional.pad(padded, (r - pad_w, r - pad_w, r - pad_h, r - pad_h))
+    return padded

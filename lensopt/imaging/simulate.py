@@ -106,4 +106,5 @@ def run_plan(model: Model, plan: ScenePlan, pilot: Pilot, region: Region, sensor
     if eff["noise"]["on"]:
         with _timed(timings, "noise"):
             out = add_noise(out, eff["noise"]["sigma"], seed=eff["noise"]["seed"])
-    return SimulationResult(out.permute(1, 2, 0).contiguous().numpy(), grid, stack, timings)
+    result = out.permute(1, 2, 0).numpy()  # a view; made contiguous by the caller if needed
+    return SimulationResult(result, grid, stack, timings)
