@@ -7,7 +7,6 @@ The ray trace is called in one place (``_trace``) so that a compiled trace can r
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 
 import torch
@@ -167,7 +166,3 @@ def compute_psfs(
                     field_deg=field_deg, wavelength_um=lens.wavelength_um, pitch_mm=settings.pitch_mm,
                     working_fnumber=wn, failed=failed, settings=settings)
 
-
-def rings_for_rays(rays: int) -> str:
-    """A ``rings:N`` sampling with about ``rays`` rays on the full pupil (N² on each half)."""
-    return f"rings:{max(1, round(math.sqrt(rays / 2)))}"

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from lensopt.analysis.psf import KERNELS
 from lensopt.analysis.psf_stack import PsfSettings, compute_psfs
 from lensopt.analysis.spot import spot_stats
 from lensopt.errors import LensoptError
@@ -18,6 +19,7 @@ from lensopt.imaging.io import linear_to_srgb, read_image, write_image
 from lensopt.imaging.metrics import psnr, ssim
 from lensopt.imaging.plan import PlanOptions, channel_weights, parse_effects
 from lensopt.imaging.simulate import plan_scene, run_plan
+from lensopt.optics.sampling import PupilSampling
 from lensopt.spec.build import Model
 
 __all__ = ["parse_grid", "run_simulate", "plot_psfs"]
@@ -53,6 +55,9 @@ def run_simulate(
 
     Returns the plan (``plan_only``) or {plan, timings, output, encodings, metrics}.
     """
+    if kernel not in KERNELS:
+        raise LensoptError(f"must be one of {', '.join(KERNELS)}", path="--kernel", got=kernel)
+    PupilSampling.parse(sampling, path="--rays")
     img, info = read_image(image_path, option="IMAGE")
     opts = PlanOptions(sampling=sampling, kernel=kernel, grid=grid, overlap=overlap, seed=seed)
     image_info = {"width": info.width, "height": info.height, "channels": info.channels, "bits": info.bits,
@@ -103,13 +108,12 @@ def plot_psfs(model: Model, output: Path, *, sampling: str = "rings:32", kernel:
     rel = torch.tensor(system.rel_field, dtype=lens.dtype)
     with torch.no_grad():
         stack = compute_psfs(lens, system, rel, settings)
-    ww, _, _ = channel_weights(spec.spectrum, 3, list(spec.spectrum.wavelengths_nm)) \
-        if spec.spectrum.rgb_weights is not None or len(spec.spectrum.wavelengths_nm) == 3 \
-        else channel_weights(spec.spectrum, 1, list(spec.spectrum.wavelengths_nm))
-    if ww.shape[1] == 1:
-        ww = np.repeat(ww, 3, axis=1)
+    wl = list(spec.spectrum.wavelengths_nm)
+    if spec.spectrum.rgb_weights is not None or len(wl) == 3:
+        ww, _, _ = channel_weights(spec.spectrum, 3, wl)
+    else:  # no colour mapping: show the spectrum-weighted sum in gray
+        ww = np.repeat(channel_weights(spec.spectrum, 1, wl)[0], 3, axis=1)
     from lensopt.optics.bundle import trace_bundle
-    from lensopt.optics.sampling import PupilSampling
 
     ps = PupilSampling.parse(sampling, seed=seed, path="--rays")
     with torch.no_grad():

@@ -58,6 +58,10 @@ def test_errors_are_one_line_with_exit_code_2(tmp_path: Path) -> None:
     assert r.exit_code == 2 and "--effects:" in r.stderr
     r = runner.invoke(app, ["simulate", COOKE, COFFEE])
     assert r.exit_code == 2 and "--output" in r.stderr
+    r = runner.invoke(app, ["simulate", COOKE, COFFEE, "--plan", "--kernel", "gauss"])
+    assert r.exit_code == 2 and "--kernel:" in r.stderr
+    r = runner.invoke(app, ["simulate", COOKE, COFFEE, "--plan", "--rays", "many"])
+    assert r.exit_code == 2 and "--rays:" in r.stderr
     spec = tmp_path / "nosensor.toml"
     spec.write_text("\n".join(line for line in Path(COOKE).read_text().splitlines()
                               if not line.startswith(("[sensor]", "pixel_pitch_um", "resolution"))))

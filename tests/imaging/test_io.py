@@ -72,3 +72,17 @@ def test_psnr_and_ssim() -> None:
     # (2 μa μb + C1)/(μa² + μb² + C1) with C1 = (0.01 L)²: (0.24 + 1e-4)/(0.40 + 1e-4) for 0.2 vs 0.6.
     ca, cb = np.full((32, 32), 0.2), np.full((32, 32), 0.6)
     assert ssim(ca, cb) == pytest.approx((0.24 + 1e-4) / (0.40 + 1e-4), rel=1e-9)
+
+
+def test_tiff_follows_the_source_encoding(tmp_path: Path) -> None:
+    import dataclasses
+
+    _, src = read_image(EXAMPLE)
+    rgb = np.random.default_rng(4).random((6, 9, 3)).astype(np.float32)
+    assert write_image(tmp_path / "i.tif", rgb, src) == "uint8 sRGB"  # from an 8-bit source
+    float_src = dataclasses.replace(src, is_float=True, bits=32, encoding="linear")
+    assert write_image(tmp_path / "f.tif", rgb, float_src) == "float linear"
+    back, info = read_image(tmp_path / "f.tif")
+    assert info.encoding == "linear" and np.array_equal(back, rgb)
+    back8, info8 = read_image(tmp_path / "i.tif")
+    assert info8.encoding == "sRGB" and np.abs(linear_to_srgb(back8) - linear_to_srgb(rgb)).max() <= 0.5 / 255 + 1e-6
