@@ -62,7 +62,7 @@ def main() -> None:
         c, h = size // 2, 24  # the seed's 49 × 49 µm crop (S4.4.3), renormalized
         crop = slice(c - h, c + h + 1)
 
-        def cropped(p: torch.Tensor) -> torch.Tensor:
+        def cropped(p: torch.Tensor, crop: slice = crop) -> torch.Tensor:
             p = p[..., crop, crop]
             return p / p.sum((-1, -2), keepdim=True)
 

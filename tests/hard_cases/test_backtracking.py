@@ -27,7 +27,7 @@ def test_negative_air_gap_between_planes() -> None:
     th1 = math.asin(math.sin(th0) / n)
     expected = heights + 9 * math.tan(th0) + 7 * math.tan(th1)
     torch.testing.assert_close(result.pos[:, 1], expected, rtol=0, atol=1e-14)
-    assert float(result.hits[2].t[0]) < 0  # the backwards step, −2 / cos θ0
+    assert float(result.hits[2].t[0].detach()) < 0  # the backwards step, −2 / cos θ0
     torch.testing.assert_close(result.hits[2].t, torch.full_like(heights, -2 / math.cos(th0)), rtol=1e-14, atol=0)
     # d(image y)/d(gap) = tan θ0 for the negative gap too: the masked loss Σ y² gives 2 Σ y tan θ0.
     torch.testing.assert_close(grads["thickness"][1], 2 * expected.sum() * math.tan(th0), rtol=1e-12, atol=0)
