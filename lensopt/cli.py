@@ -8,6 +8,7 @@ from __future__ import annotations
 import functools
 import json
 import logging
+import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -24,7 +25,7 @@ from lensopt.spec import Model, build, load_spec
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Differentiable lens design: trace, plot, optimize, simulate, export.")
-plot_app = typer.Typer(no_args_is_help=True, help="Figures: layout, ray fans, spot diagrams.")
+plot_app = typer.Typer(no_args_is_help=True, help="Figures: layout, ray fans, spot diagrams, PSFs.")
 app.add_typer(plot_app, name="plot")
 
 # Wide enough for the tables when stdout is a pipe or a file (rich would assume 80 columns).
@@ -106,19 +107,24 @@ def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None,
 
 
 def _render_trace(r: dict[str, Any]) -> None:
+    ref = r["wavelengths_nm"].index(r["reference_nm"])
+    console.print(f"[bold]{r['name']}[/]")
+    console.print(_prescription_table(r["surfaces"], ref, r["reference_nm"]))
     fo = r["first_order"]
-    t = Table(title=f"{r['name']} — first-order data (reference {r['reference_nm']:g} nm)", show_header=False)
-    labels = {"efl": "EFL", "bfl": "BFL", "ffl": "FFL (front focus from S1)", "epd": "EPD",
-              "entrance_pupil_z": "entrance pupil z (from S1)", "exit_pupil_z": "exit pupil z (from S1)",
-              "exit_pupil_diameter": "exit pupil diameter", "fnumber": "f-number (EFL/EPD)",
-              "working_fnumber": "working f-number", "paraxial_image_height": "paraxial image height",
-              "total_track": "total track"}
+    t = Table(title=f"first-order data ({r['reference_nm']:g} nm)", title_justify="left")
+    t.add_column("quantity")
+    t.add_column("value", justify="right")
+    t.add_column("unit")
+    labels = {"efl": "EFL", "bfl": "BFL (last surface to focus)", "ffl": "FFL (front focus from S1)",
+              "epd": "EPD", "entrance_pupil_z": "entrance pupil z (from S1)",
+              "exit_pupil_z": "exit pupil z (from S1)", "exit_pupil_diameter": "exit pupil diameter",
+              "fnumber": "f-number (EFL/EPD)", "working_fnumber": "working f-number",
+              "paraxial_image_height": "paraxial image height", "total_track": "total track"}
     for key, label in labels.items():
-        unit = "" if "fnumber" in key else " mm"
-        t.add_row(label, f"{fo[key]:.6f}{unit}")
+        t.add_row(label, f"{fo[key]:.6f}", "" if "fnumber" in key else "mm")
     console.print(t)
     wl = r["wavelengths_nm"]
-    s = Table(title=f"RMS spot radius (µm), sampling {r['sampling']}, aim {r['aim']}")
+    s = Table(title=f"RMS spot radius (µm), sampling {r['sampling']}, aim {r['aim']}", title_justify="left")
     s.add_column("field °", justify="right")
     for w in wl:
         s.add_column(f"{w:g} nm", justify="right")
@@ -175,6 +181,31 @@ def _render_field(r: dict[str, Any]) -> None:
         console.print(f"[yellow]note:[/] {note}", highlight=False)
 
 
+def _prescription_table(surfaces: list[dict[str, Any]], ref: int, ref_nm: float) -> Table:
+    """The resolved prescription as traced: one row per surface (the ``surfaces`` of ``trace --json``)."""
+    t = Table(title="prescription (lengths in mm)", title_justify="left")
+    for col, just in (("surf", "right"), ("type", "left"), ("radius", "right"), ("thickness", "right"),
+                      ("material", "left"), (f"n {ref_nm:g} nm", "right"), ("semi-diam.", "right"),
+                      ("notes", "left")):
+        t.add_column(col, justify=just)  # type: ignore[arg-type]
+    for i, sf in enumerate(surfaces, start=1):
+        radius = "inf" if math.isinf(sf["radius"]) else f"{sf['radius']:.6f}"
+        notes = []
+        if sf["stop"]:
+            notes.append("stop")
+        if sf["conic"]:
+            notes.append(f"k={sf['conic']:g}")
+        if sf["asphere"]:
+            notes.append("asph " + " ".join(f"a{p}={v:.4g}" for p, v in sf["asphere"].items()))
+        if "diffractive" in sf:
+            d = sf["diffractive"]
+            notes.append("DOE " + " ".join(f"d{p}={v:.4g}" for p, v in d.items() if p.isdigit())
+                         + f" @{d['design_wavelength_nm']:g} nm m={d['order']}")
+        t.add_row(str(i), sf["type"], radius, f"{sf['thickness']:.6f}", sf["material"],
+                  f"{sf['index'][ref]:.6f}", f"{sf['semi_diameter']:.4f}", ", ".join(notes))
+    return t
+
+
 # ------------------------------------------------------------------------------------------- ray
 
 
@@ -191,10 +222,14 @@ def ray(
     """One real ray, surface by surface: position, direction cosines, angles (like CODE V's RSI)."""
     from lensopt.analysis.report import ray_report
 
+    if not (math.isfinite(field) and abs(field) < 90.0):
+        raise LensoptError("must be a field angle in degrees, strictly between -90 and 90", path="--field", got=field)
+    if not all(math.isfinite(p) for p in pupil):
+        raise LensoptError("must be two finite relative pupil coordinates", path="--pupil", got=pupil)
     model = load_model(lens)
     if wavelength is None:
         wavelength = model.spec.spectrum.wavelengths_nm[model.system.reference]
-    if not wavelength > 0:
+    if not (math.isfinite(wavelength) and wavelength > 0):
         raise LensoptError("must be a positive wavelength in nm", path="--wavelength", got=wavelength)
     r = ray_report(model, field_deg=field, px=pupil[0], py=pupil[1], wavelength_nm=wavelength,
                    aim=check_aim(aim) or model.system.aim)
@@ -215,32 +250,248 @@ def ray(
     console.print(f"status: {r['status']}" + (" (backtracking flagged)" if r["backtracking"] else ""))
 
 
+# ------------------------------------------------------------------------------------------ plot
+
+OutOpt = Annotated[Path, typer.Option("--output", "-o",
+                                      help="Image file (.png, .pdf, .svg, .jpg; the suffix picks the format).")]
+DpiOpt = Annotated[int, typer.Option("--dpi", min=30, max=1200, help="Resolution of raster images.")]
+
+
+def _titles(model: Model) -> tuple[str, str]:
+    """Figure title and a one-line first-order summary."""
+    from lensopt.optics.paraxial import first_order
+
+    fo = first_order(model.lens, model.system)
+    s = model.system
+    field = (f"HFOV {s.field_max:g}°" if s.field_type == "angle" else f"image height {s.field_max:g} mm")
+    wl = "/".join(f"{w:g}" for w in model.spec.spectrum.wavelengths_nm)
+    return model.spec.name, f"EFL {float(fo.efl):.3f} mm · f/{float(fo.fnumber):.2f} · {field} · {wl} nm"
+
+
+def _check_output(path: Path) -> Path:
+    if path.suffix.lower() not in (".png", ".pdf", ".svg", ".jpg", ".jpeg"):
+        raise LensoptError("expected an image file name ending in .png, .pdf, .svg or .jpg",
+                           path="--output", got=str(path))
+    return path
+
+
+@plot_app.command("layout")
+@handle_errors
+def plot_layout_cmd(lens: LensArg, output: OutOpt, aim: AimOpt = None,
+                    rays: Annotated[int, typer.Option("--rays", min=2, max=101,
+                                                      help="Meridional rays per field.")] = 7,
+                    dpi: DpiOpt = 150) -> None:
+    """2D meridional layout: elements, stop, image plane and traced rays per field."""
+    from lensopt.analysis.layout import layout
+    from lensopt.plot import plot_layout, save_figure
+
+    out = _check_output(output)
+    model = load_model(lens)
+    data = layout(model, aim=check_aim(aim), rays_per_field=rays)
+    title, sub = _titles(model)
+    save_figure(plot_layout(data, title=title, subtitle=sub), out, dpi=dpi)
+    err_console.print(f"wrote {output}")
+
+
+@plot_app.command("fans")
+@handle_errors
+def plot_fans_cmd(lens: LensArg, output: OutOpt, aim: AimOpt = None,
+                  points: Annotated[int, typer.Option("--points", min=3, max=2001,
+                                                      help="Rays per fan.")] = 101,
+                  dpi: DpiOpt = 150) -> None:
+    """Tangential and sagittal ray fans per field, one curve per wavelength (S1.3.4)."""
+    import torch
+
+    from lensopt.analysis.fans import ray_fans
+    from lensopt.plot import plot_fans, save_figure
+
+    out = _check_output(output)
+    model = load_model(lens)
+    with torch.no_grad():
+        fans = ray_fans(model.lens, model.system, points=points, aim=check_aim(aim))
+    title, sub = _titles(model)
+    save_figure(plot_fans(fans, title=title, subtitle=sub), out, dpi=dpi)
+    err_console.print(f"wrote {output}")
+
+
+@plot_app.command("spots")
+@handle_errors
+def plot_spots_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings:24", aim: AimOpt = None,
+                   seed: SeedOpt = 0, dpi: DpiOpt = 150) -> None:
+    """Spot diagram per field, colour per wavelength, RMS radius and Airy disc."""
+    import torch
+
+    from lensopt.analysis.spot_diagram import spot_diagram
+    from lensopt.plot import plot_spots, save_figure
+
+    out = _check_output(output)
+    model = load_model(lens)
+    pupil = PupilSampling.parse(sampling, seed=seed, path="--sampling")
+    with torch.no_grad():
+        spots = spot_diagram(model.lens, model.system, pupil, aim=check_aim(aim))
+    title, sub = _titles(model)
+    save_figure(plot_spots(spots, title=title, subtitle=sub), out, dpi=dpi)
+    err_console.print(f"wrote {output}")
+
+
+# ----------------------------------------------------------------------------------------- codev
+
+OutputOpt = Annotated[Path, typer.Option("--output", "-o", help="Output file.")]
+
+
+@app.command("export-codev")
+@handle_errors
+def export_codev(
+    lens: LensArg,
+    output: OutputOpt,
+    private_catalog: Annotated[bool, typer.Option(
+        "--private-catalog", help="Write every glass as a private catalog of lensopt's indices.")] = False,
+) -> None:
+    """Write the lens as a CODE V sequence file (.seq)."""
+    from lensopt.io.codev_export import write_codev
+
+    write_codev(load_spec(lens), output, private_catalog=private_catalog)
+    err_console.print(f"wrote {output}", highlight=False)
+
+
+@app.command("import-codev")
+@handle_errors
+def import_codev(
+    seq: Annotated[Path, typer.Argument(help="CODE V sequence file (.seq).")],
+    output: OutputOpt,
+) -> None:
+    """Read a CODE V sequence file into a lensopt lens (.json)."""
+    from lensopt.io.codev_import import read_codev
+    from lensopt.spec.io import save_json
+
+    if output.suffix.lower() != ".json":
+        raise LensoptError("the imported lens is written as JSON; name it *.json", path="--output",
+                           got=str(output))
+    result = read_codev(seq)
+    for warning in result.warnings:
+        err_console.print(f"[yellow]warning:[/] {warning}", markup=True, highlight=False, soft_wrap=True)
+    save_json(result.spec, output)
+    err_console.print(f"wrote {output}", highlight=False)
+
+
+# -------------------------------------------------------------------------------------- simulate
+
+
+@app.command()
+@handle_errors
+def simulate(
+    lens: LensArg,
+    image: Annotated[Path, typer.Argument(help="Scene image (PNG/JPEG/TIFF/EXR; 8/16-bit files are sRGB).")],
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="Simulated image (format from suffix).")] = None,
+    region: Annotated[str | None, typer.Option("--region", help="Where the image lies on the sensor: "
+                                               "x0,y0,w,h | full | center | corner | tile:C,R/NCxNR.")] = None,
+    effects: Annotated[str | None, typer.Option("--effects", help="Force effects: +name / -name / noise=σ; names: "
+                                                "convolution, diffraction, distortion, ri, noise.")] = None,
+    reference: Annotated[Path | None, typer.Option("--reference", help="Image to score the result against "
+                                                   "(PSNR/SSIM); default: the input scene.")] = None,
+    plan_only: Annotated[bool, typer.Option("--plan", help="Print the plan and stop (nothing simulated).")] = False,
+    rays: Annotated[str, typer.Option("--rays", help="Pupil sampling per PSF (rings:N = 2N² rays).")] = "rings:32",
+    kernel: Annotated[str, typer.Option("--kernel", help="count | triangular | cosine (S1.4).")] = "triangular",
+    grid: Annotated[str | None, typer.Option("--grid", help="Force the PSF grid, e.g. 5x4.")] = None,
+    overlap: Annotated[float, typer.Option("--overlap", help="Overlap of patches (S1.5.2).")] = 0.25,
+    seed: SeedOpt = 0,
+    as_json: JsonOpt = False,
+) -> None:
+    """Simulate a scene through the lens, computing only the effects the scene calls for."""
+    from lensopt.imaging.commands import parse_grid, run_simulate
+
+    if not plan_only and output is None:
+        raise LensoptError("needed unless --plan", path="--output")
+    if not 0.0 <= overlap < 1.0:
+        raise LensoptError("must lie in [0, 1)", path="--overlap", got=overlap)
+    result = run_simulate(load_model(lens), image, output, region=region, effects=effects, reference=reference,
+                          plan_only=plan_only, sampling=rays, kernel=kernel, grid=parse_grid(grid), overlap=overlap,
+                          seed=seed, on_plan=None if as_json else _render_plan)
+    if as_json:
+        print_json(result)
+    elif not plan_only:
+        _render_run(result)
+
+
+def _render_plan(p: dict[str, Any]) -> None:
+    t = Table(title=f"plan — {p['lens']}: {p['image']['width']}×{p['image']['height']} "
+                    f"{'/'.join(p['channels'])} ({p['image']['encoding']}) on region {p['region']['name']} "
+                    f"({p['region']['w']:.0f}×{p['region']['h']:.0f} sensor px, image pixel {p['pixel_um']:.2f} µm)",
+              show_header=False)
+    t.add_row("wavelengths", ", ".join(f"{w:g}" for w in p["wavelengths_nm"]) + " nm")
+    t.add_row("fields traced", ", ".join(f"{f:.2f}°" for f in p["fields_deg"]) or "none")
+    grid = p["psf_grid"]
+    t.add_row("PSF grid", f"{grid[0]}×{grid[1]}, overlap {p['overlap']:.0%}" if grid else "none")
+    ps = p["psf"]
+    t.add_row("PSFs", f"{ps['sampling']}, {ps['kernel']} kernel, bins {ps['pitch_um']:.2f} µm"
+                      + (", resized to the image pixel" if ps["resize_to_pixel"] else ""))
+    for name, e in p["effects"].items():
+        t.add_row(name, f"[{'green' if e['on'] else 'dim'}]{'on' if e['on'] else 'off'}[/] — {e['reason']}")
+    for note in p["notes"]:
+        t.add_row("note", note)
+    console.print(t)
+
+
+def _render_run(r: dict[str, Any]) -> None:
+    t = Table(title="stages")
+    t.add_column("stage")
+    t.add_column("s", justify="right")
+    for k, v in r["timings"].items():
+        t.add_row(k, f"{v:.3f}")
+    console.print(t)
+    m = r.get("metrics")
+    if m:
+        console.print(f"vs {m['against']}: PSNR {m['psnr_db']:.2f} dB, SSIM {m['ssim']:.4f} ({m['space']})")
+    console.print(f"wrote {r['output']} ({r['output_encoding']}; input {r['input_encoding']})")
+
+
+# ------------------------------------------------------------------------------------- plot psf
+
+
+@plot_app.command("psf")
+@handle_errors
+def plot_psf(
+    lens: LensArg,
+    output: Annotated[Path, typer.Option("--output", "-o", help="Figure file (png, pdf, svg).")],
+    rays: Annotated[str, typer.Option("--rays", help="Pupil sampling per PSF.")] = "rings:32",
+    kernel: Annotated[str, typer.Option("--kernel", help="count | triangular | cosine.")] = "triangular",
+    diffraction: Annotated[str, typer.Option("--diffraction", help="heuristic | none | incoherent.")] = "heuristic",
+    pitch_um: Annotated[float | None, typer.Option("--pitch-um", help="Bin size (default: sensor pitch, "
+                                                   "else 1 µm).")] = None,
+    sqrt: Annotated[bool, typer.Option("--sqrt", help="Square-root intensity scale (shows the tails).")] = False,
+    seed: SeedOpt = 0,
+) -> None:
+    """RGB PSFs across the field (the spec's fields)."""
+    from lensopt.imaging.commands import plot_psfs
+
+    plot_psfs(load_model(lens), output, sampling=rays, kernel=kernel, diffraction=diffraction, pitch_um=pitch_um,
+              sqrt=sqrt, seed=seed)
+    console.print(f"wrote {output}")
+
+
 # ------------------------------------------------------------------------------------ plot field
 
 
 @plot_app.command("field")
 @handle_errors
-def plot_field_cmd(
-    lens: LensArg,
-    output: Annotated[Path, typer.Option("-o", "--output", help="Image file (.png, .pdf, .svg).")],
-    sampling: SamplingOpt = "rings:16",
-    aim: AimOpt = None,
-    aim_steps: AimStepsOpt = None,
-    points: Annotated[int, typer.Option("--points", help="Field samples from axis to full field.")] = 21,
-    seed: SeedOpt = 0,
-) -> None:
+def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings:16", aim: AimOpt = None,
+                   aim_steps: AimStepsOpt = None,
+                   points: Annotated[int, typer.Option("--points", min=2, max=401,
+                                                       help="Field samples from axis to full field.")] = 21,
+                   seed: SeedOpt = 0, dpi: DpiOpt = 150) -> None:
     """Distortion (S48) and relative illumination (S51, S52) against field."""
     from lensopt.analysis.field import field_summary
-    from lensopt.plot.field import plot_field
+    from lensopt.plot.field import field_figure
+    from lensopt.plot.style import save_figure
 
-    if not 2 <= points <= 401:
-        raise LensoptError("must be from 2 to 401", path="--points", got=points)
+    out = _check_output(output)
     model = load_model(lens)
     summary = field_summary(model.lens, model.system, PupilSampling.parse(sampling, seed=seed, path="--sampling"),
                             rel_field=[i / (points - 1) for i in range(points)], aim=check_aim(aim),
                             aim_steps=check_aim_steps(aim_steps))
-    plot_field(summary, output, title=model.spec.name)
-    console.print(f"wrote {output}")
+    title, sub = _titles(model)
+    save_figure(field_figure(summary, title=title, subtitle=sub), out, dpi=dpi)
+    err_console.print(f"wrote {output}")
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -34,6 +34,9 @@ class Status(IntEnum):
     BLOCKED = 5  # stopped by the front aperture in object space (set by optics.bundle)
 
 
+_OK = int(Status.OK)
+"""Plain-int OK code: ``tensor == IntEnum`` breaks the ``torch.compile`` graph, ``tensor == int`` does not."""
+
 REASONS = {
     Status.MISSED: "missed surface",
     Status.TIR: "total internal reflection",
@@ -102,7 +105,7 @@ class RayTrace:
     @property
     def valid(self) -> Tensor:
         """(*B) bool: rays that reached the end."""
-        return self.status == Status.OK
+        return self.status == _OK
 
 
 def trace(
@@ -149,7 +152,7 @@ def trace(
             missed, newton_failed = ~hit, torch.zeros_like(hit)
         point = local + t.unsqueeze(-1) * dir
         if s > 0:
-            backtrack = backtrack | ((t < 0) & (status == Status.OK))
+            backtrack = backtrack | ((t < 0) & (status == _OK))
         status = _fail(status, missed, Status.MISSED)
         status = _fail(status, newton_failed, Status.NEWTON)
         u = point[..., 0] ** 2 + point[..., 1] ** 2
@@ -157,7 +160,7 @@ def trace(
             status = _fail(status, u > lens.semi_diameter[s] ** 2, Status.CLIPPED)
         hit_pos = point + origin
         if upto is not None and s == upto:
-            ok = (status == Status.OK).unsqueeze(-1)
+            ok = (status == _OK).unsqueeze(-1)
             pos = torch.where(ok, hit_pos, pos)
             break
         asph = lens.asphere[s] if shape.kind == "asphere" else None
@@ -174,7 +177,7 @@ def trace(
         status = _fail(status, tir, Status.TIR)
         if record:
             hits.append(SurfaceHit(hit_pos, dir, dir_out, normal, t, cos2_in, cos2_out))
-        ok = (status == Status.OK).unsqueeze(-1)
+        ok = (status == _OK).unsqueeze(-1)
         pos = torch.where(ok, hit_pos, pos)
         dir = torch.where(ok, dir_out, forward)
     else:
@@ -183,15 +186,15 @@ def trace(
         safe_dz = torch.where(dz.abs() > torch.finfo(dz.dtype).eps, dz, torch.ones_like(dz))
         t = (vertex[-1] - pos[..., 2]) / safe_dz
         status = _fail(status, dz.abs() <= torch.finfo(dz.dtype).eps, Status.MISSED)
-        backtrack = backtrack | ((t < 0) & (status == Status.OK))
-        ok = (status == Status.OK).unsqueeze(-1)
+        backtrack = backtrack | ((t < 0) & (status == _OK))
+        ok = (status == _OK).unsqueeze(-1)
         pos = torch.where(ok, pos + t.unsqueeze(-1) * dir, pos)
     return RayTrace(pos=pos, dir=dir, status=status, backtrack=backtrack, hits=tuple(hits))
 
 
 def _fail(status: Tensor, failed: Tensor, reason: Status) -> Tensor:
     """Record ``reason`` for rays that fail now and had not failed before."""
-    return torch.where((status == Status.OK) & failed, torch.full_like(status, int(reason)), status)
+    return torch.where((status == _OK) & failed, torch.full_like(status, int(reason)), status)
 
 
 def failure_counts(result: RayTrace) -> dict[str, int]:

@@ -1,29 +1,29 @@
 """Field curves: distortion (S48) and relative illumination (S51, S52) against field angle.
 
-Takes a ``FieldSummary`` (analysis results); traces nothing. Written atomically.
+Takes a ``FieldSummary`` (analysis results); traces nothing. Save with ``plot.style.save_figure``.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
+from matplotlib.figure import Figure
 
-import matplotlib
+from lensopt.analysis.field import FieldSummary
+from lensopt.plot.style import new_figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-
-from lensopt.analysis.field import FieldSummary  # noqa: E402
-from lensopt.io.files import atomic_path  # noqa: E402
-
-__all__ = ["field_figure", "plot_field"]
+__all__ = ["field_figure"]
 
 
-def field_figure(s: FieldSummary, *, title: str = "") -> Figure:
-    """Two panels: distortion in % and relative illumination (S51, S52) against the field angle."""
+def field_figure(s: FieldSummary, *, title: str = "", subtitle: str = "") -> Figure:
+    """Two panels: distortion in % and relative illumination (S51, S52) against the field angle.
+
+    Fields none of whose rays reached the image are left out of the distortion curve (nothing to
+    measure); both illumination estimates are 0 there.
+    """
+    valid = (s.valid_fraction > 0).cpu().numpy()
     angle = s.angle_deg.cpu().numpy()
-    fig, (ax_d, ax_r) = plt.subplots(1, 2, figsize=(10, 4.2), layout="constrained")
-    ax_d.plot(100.0 * s.distortion.cpu().numpy(), angle, color="tab:blue")
+    fig = new_figure(10.0, 4.4)
+    ax_d, ax_r = fig.subplots(1, 2)
+    ax_d.plot(100.0 * s.distortion.cpu().numpy()[valid], angle[valid], color="tab:blue")
     ax_d.axvline(0.0, color="0.6", lw=0.8)
     ax_d.set_xlabel("distortion (%)  (S48: centroid vs paraxial height)")
     ax_d.set_ylabel("field angle (°)")
@@ -38,16 +38,6 @@ def field_figure(s: FieldSummary, *, title: str = "") -> Figure:
     ax_r.grid(alpha=0.3)
     ax_r.legend(loc="lower left")
     ax_r.set_title("Relative illumination")
-    if title:
-        fig.suptitle(title)
+    if title or subtitle:
+        fig.suptitle(title + (f"\n{subtitle}" if subtitle else ""), fontsize=10)
     return fig
-
-
-def plot_field(s: FieldSummary, path: str | Path, *, title: str = "") -> None:
-    """Write ``field_figure`` to ``path`` (format from the suffix), atomically."""
-    fig = field_figure(s, title=title)
-    try:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=130)
-    finally:
-        plt.close(fig)
