@@ -35,7 +35,9 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 LensArg = Annotated[Path, typer.Argument(help="Lens spec (.toml) or resolved lens (.json).")]
 SamplingOpt = Annotated[str, typer.Option("--sampling", help="Pupil sampling: rings:N[:nojitter] or grid:N.")]
-AimOpt = Annotated[str | None, typer.Option("--aim", help="Ray aiming: none | chief (default: the spec's).")]
+AimOpt = Annotated[str | None, typer.Option("--aim", help="Ray aiming: none | chief | full (default: the spec's).")]
+AimStepsOpt = Annotated[int | None, typer.Option("--aim-steps",
+                                                 help="Newton steps of full aiming (default: the spec's).")]
 SeedOpt = Annotated[int, typer.Option("--seed", help="Seed of every random draw (pupil jitter).")]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object instead of tables.")]
 
@@ -68,9 +70,15 @@ def load_model(path: Path) -> Model:
 
 
 def check_aim(aim: str | None) -> str | None:
-    if aim is not None and aim not in ("none", "chief"):
-        raise LensoptError("must be none or chief", path="--aim", got=aim)
+    if aim is not None and aim not in ("none", "chief", "full"):
+        raise LensoptError("must be none, chief or full", path="--aim", got=aim)
     return aim
+
+
+def check_aim_steps(steps: int | None) -> int | None:
+    if steps is not None and not 1 <= steps <= 100:
+        raise LensoptError("must be an integer from 1 to 100", path="--aim-steps", got=steps)
+    return steps
 
 
 def print_json(obj: Any) -> None:
@@ -83,17 +91,19 @@ def print_json(obj: Any) -> None:
 @app.command()
 @handle_errors
 def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None, seed: SeedOpt = 0,
-          as_json: JsonOpt = False) -> None:
-    """First-order data, RMS spot radius per field and wavelength, ray failures."""
+          as_json: JsonOpt = False, aim_steps: AimStepsOpt = None) -> None:
+    """First-order data, RMS spot radius per field and wavelength, ray failures, distortion and
+    relative illumination per field."""
     from lensopt.analysis.report import trace_report
 
     model = load_model(lens)
     report = trace_report(model, PupilSampling.parse(sampling, seed=seed, path="--sampling"),
-                          aim=check_aim(aim))
+                          aim=check_aim(aim), aim_steps=check_aim_steps(aim_steps))
     if as_json:
         print_json(report)
         return
     _render_trace(report)
+    _render_field(report)
 
 
 def _render_trace(r: dict[str, Any]) -> None:
@@ -139,6 +149,36 @@ def _render_trace(r: dict[str, Any]) -> None:
         console.print("ray failures: " + ", ".join(f"{k}: {v}" for k, v in failures.items()))
     else:
         console.print("ray failures: none")
+
+
+def _num(v: float | None, fmt: str = ".4f") -> str:
+    return "—" if v is None else format(v, fmt)
+
+
+def _render_field(r: dict[str, Any]) -> None:
+    from lensopt.analysis.field import AIM_NOTE_FRACTION
+
+    full = r["aim"] == "full"
+    t = Table(title=f"Distortion, relative illumination, pupil (V factors at {r['reference_nm']:g} nm)"
+                    + (f", full aiming {r['aim_steps']} step(s), stop radius {r['stop_radius_mm']:.6f} mm"
+                       if full else ""))
+    for col in ("field °", "distortion %", "RI S51", "RI S52", "V_i", "V_s", "V_l"):
+        t.add_column(col, justify="right")
+    if full:
+        t.add_column("stop miss µm", justify="right")
+        limit = 1e3 * AIM_NOTE_FRACTION * r["stop_radius_mm"]
+    for f in r["fields"]:
+        v = f["vignetting"]
+        ri = f["relative_illumination"]
+        row = [f"{f['angle_deg']:.3f}", _num(f["distortion_percent"]), _num(ri["three_ray"]), _num(ri["std"]),
+               f"{v['inferior']:.4f}", f"{v['superior']:.4f}", f"{v['lateral']:.4f}"]
+        if full:
+            miss = 1e3 * max(v["aim_residual_mm"].values())
+            row.append(f"{miss:.2e}" + ("" if v["aim_rays_traced"] and miss <= limit else " (!)"))
+        t.add_row(*row)
+    console.print(t)
+    for note in r["notes"]:
+        console.print(f"[yellow]note:[/] {note}", highlight=False)
 
 
 def _prescription_table(surfaces: list[dict[str, Any]], ref: int, ref_nm: float) -> Table:
@@ -427,6 +467,31 @@ def plot_psf(
     plot_psfs(load_model(lens), output, sampling=rays, kernel=kernel, diffraction=diffraction, pitch_um=pitch_um,
               sqrt=sqrt, seed=seed)
     console.print(f"wrote {output}")
+
+
+# ------------------------------------------------------------------------------------ plot field
+
+
+@plot_app.command("field")
+@handle_errors
+def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings:16", aim: AimOpt = None,
+                   aim_steps: AimStepsOpt = None,
+                   points: Annotated[int, typer.Option("--points", min=2, max=401,
+                                                       help="Field samples from axis to full field.")] = 21,
+                   seed: SeedOpt = 0, dpi: DpiOpt = 150) -> None:
+    """Distortion (S48) and relative illumination (S51, S52) against field."""
+    from lensopt.analysis.field import field_summary
+    from lensopt.plot.field import field_figure
+    from lensopt.plot.style import save_figure
+
+    out = _check_output(output)
+    model = load_model(lens)
+    summary = field_summary(model.lens, model.system, PupilSampling.parse(sampling, seed=seed, path="--sampling"),
+                            rel_field=[i / (points - 1) for i in range(points)], aim=check_aim(aim),
+                            aim_steps=check_aim_steps(aim_steps))
+    title, sub = _titles(model)
+    save_figure(field_figure(summary, title=title, subtitle=sub), out, dpi=dpi)
+    err_console.print(f"wrote {output}")
 
 
 if __name__ == "__main__":  # pragma: no cover

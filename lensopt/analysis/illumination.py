@@ -28,7 +28,8 @@ def _reference_field(bundle: Bundle) -> int:
 
 
 def relative_illumination_std(bundle: Bundle, wavelength_weights: Tensor) -> Tensor:
-    """(F,) S52 estimate from every valid ray of a full bundle (batch F × W × P), differentiable."""
+    """(F,) S52 estimate from every valid ray of a full bundle (batch F × W × P), differentiable;
+    0 for a field none of whose rays reaches the image."""
     res = bundle.result
     valid = res.valid
     w = wavelength_weights.to(res.dir.dtype)[None, :, None] * valid.to(res.dir.dtype)
@@ -43,7 +44,9 @@ def relative_illumination_std(bundle: Bundle, wavelength_weights: Tensor) -> Ten
     a_std = std(res.dir[..., 0], zero_mean=bundle.half_pupil)
     b_std = std(res.dir[..., 1], zero_mean=False)
     ref = _reference_field(bundle)
-    return a_std * b_std / (a_std[ref] * b_std[ref])
+    lit = valid.any(-1).any(-1)
+    r = a_std * b_std / (a_std[ref] * b_std[ref])
+    return torch.where(lit, r, torch.zeros_like(r))  # no ray through: no light (not sqrt(tiny)²)
 
 
 def relative_illumination_three_ray(bundle: Bundle, wavelength: int) -> Tensor:

@@ -5,39 +5,61 @@ Units in reports: mm for lengths, µm for spot radii, nm for wavelengths, degree
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
 import torch
 
+from lensopt.analysis.field import field_summary
 from lensopt.analysis.spot import spot_stats
-from lensopt.optics.aiming import aim_chief
-from lensopt.optics.bundle import trace_bundle
+from lensopt.optics.bundle import pupil_shape, trace_bundle
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling, launch, pupil_grid
 from lensopt.optics.trace import REASONS, Rays, Status, trace
+from lensopt.optics.vignetting import apply_vignetting, outside_front_aperture
 from lensopt.spec.build import Model, build
 from lensopt.spec.models import DiffractiveSurface
 
 __all__ = ["trace_report", "ray_report", "auto_semi_diameters"]
 
 
-def trace_report(model: Model, sampling: PupilSampling, *, aim: str | None = None) -> dict[str, Any]:
-    """First-order data, per-field spot sizes and failures, and the resolved prescription."""
+def trace_report(
+    model: Model, sampling: PupilSampling, *, aim: str | None = None, aim_steps: int | None = None
+) -> dict[str, Any]:
+    """First-order data, per-field spot sizes, failures, distortion, relative illumination, pupil
+    (vignetting, aiming) data, notes, and the resolved prescription."""
     lens, system = model.lens, model.system
+    if aim_steps is not None:
+        system = dataclasses.replace(system, aim_steps=aim_steps)
+    mode = aim or system.aim
     with torch.no_grad():
         fo = first_order(lens, system)
-        bundle = trace_bundle(lens, system, sampling.points(dtype=lens.dtype), half_pupil=sampling.half,
-                              aim=aim, fo=fo)
+        summary = field_summary(lens, system, sampling, aim=mode)
+        bundle = summary.bundle
         field_weights = (torch.tensor(system.field_weights, dtype=lens.dtype, device=lens.device)
                          if system.field_weights else None)
         stats = spot_stats(bundle, system.wavelength_weights, field_weights)
-        chief = trace_bundle(lens, system, torch.zeros(1, 2, dtype=lens.dtype), aim=aim, fo=fo)
-        sd = auto_semi_diameters(model, aim=aim)
+        # The chief ray is the reference ray through the stop centre (aimed) or the paraxial pupil
+        # centre (not aimed), whatever vignetting does to the bundle around it.
+        bare = dataclasses.replace(system, vignetting=(), front_aperture=None)
+        chief = trace_bundle(lens, bare, torch.zeros(1, 2, dtype=lens.dtype), aim="chief" if mode == "full" else mode,
+                             fo=fo)
+        sd = auto_semi_diameters(dataclasses.replace(model, system=system), aim=mode)
     ref = system.reference
     fields = []
     for h in range(len(system.rel_field)):
         status = bundle.result.status[h]
+        lit = bool((status == Status.OK).any())
+        dark = bool((status == Status.BLOCKED).all())
+        v = summary.vignetting[h, ref]
+        pupil: dict[str, Any] = {"inferior": float(v[0]), "superior": float(v[1]), "lateral": float(v[2])}
+        if summary.aim_residual_mm is not None and summary.aim_converged is not None:
+            res = summary.aim_residual_mm[h].abs().amax(0)
+            pupil["aim_residual_mm"] = {k: float(res[i]) for i, k in enumerate(("inferior", "superior", "lateral",
+                                                                                "chief"))}
+            pupil["aim_converged"] = bool(summary.aim_converged[h].all())
+            pupil["aim_rays_traced"] = bool(summary.aim_traced[h].all()) if summary.aim_traced is not None else False
         fields.append({
             "relative": system.rel_field[h],
             "angle_deg": math.degrees(math.atan(float(bundle.tan_field[h]))),
@@ -49,6 +71,13 @@ def trace_report(model: Model, sampling: PupilSampling, *, aim: str | None = Non
             "failures": {REASONS[r]: int((status == r).sum()) for r in REASONS if (status == r).any()},
             "backtracking_rays": int(bundle.result.backtrack[h].sum()),
             "rays": int(status.numel()),
+            # None where no ray reached the image (nothing to measure); the illumination is 0 where the
+            # front aperture blocks the whole beam (nothing gets through).
+            "distortion_percent": 100.0 * float(summary.distortion[h]) if lit else None,
+            "paraxial_image_height_mm": float(summary.paraxial_height_mm[h]),
+            "relative_illumination": {"three_ray": float(summary.ri_three_ray[h]) if lit or dark else None,
+                                      "std": float(summary.ri_std[h]) if lit or dark else None},
+            "vignetting": pupil,
         })
     report: dict[str, Any] = {
         "name": model.spec.name,
@@ -69,9 +98,14 @@ def trace_report(model: Model, sampling: PupilSampling, *, aim: str | None = Non
         "wavelength_weights": [float(w) for w in system.wavelength_weights],
         "reference_nm": model.spec.spectrum.wavelengths_nm[ref],
         "sampling": str(sampling),
-        "aim": aim or system.aim,
+        "aim": mode,
+        "aim_steps": system.aim_steps,
+        "front_aperture": (dataclasses.asdict(system.front_aperture) if system.front_aperture is not None
+                           else None),
+        "stop_radius_mm": summary.stop_radius_mm,
         "effective_spot_radius_um": 1e3 * float(stats.effective_radius),
         "fields": fields,
+        "notes": list(summary.notes),
         "surfaces": _surfaces(model, sd),
     }
     return report
@@ -138,13 +172,18 @@ def ray_report(
         # every wavelength, exactly as in ``trace_bundle``; not the paraxial pupil of the ray's own one.
         fo = first_order(model.lens, model.system)
         pupil = torch.tensor([[[[px, py]]]], dtype=lens.dtype)
-        offset = 0.0
-        if aim == "chief":
-            chief = aim_chief(lens, system, tan, epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z)
-            offset = float(chief.offset[0, 0])
-        pupil = pupil + torch.tensor([0.0, offset], dtype=lens.dtype)
+        # (px, py) are relative to the aimed pupil, cut by the front aperture if there is one.
+        shape = pupil_shape(lens, system, tan, fo, aim=aim, aim_steps=system.aim_steps)
+        if shape.factors is not None:
+            pupil = apply_vignetting(pupil, shape.factors)
         rays: Rays = launch(lens, system, pupil, tan, epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z)
         result = trace(lens, rays, record=True)
+        fa = system.front_aperture
+        if fa is not None:
+            pos, dirs = torch.broadcast_tensors(rays.pos, rays.dir)
+            out = outside_front_aperture(pos, dirs, fa.distance, fa.diameter)
+            result = dataclasses.replace(result, status=torch.where(
+                out, torch.full_like(result.status, int(Status.BLOCKED)), result.status))
     surfaces = []
     for i, hit in enumerate(result.hits):
         p, d = hit.pos.reshape(3), hit.dir_out.reshape(3)
@@ -158,7 +197,8 @@ def ray_report(
     d = result.dir.reshape(3)
     status = int(result.status.reshape(()).item())
     return {
-        "field_deg": field_deg, "pupil": [px, py + offset], "wavelength_nm": wavelength_nm, "aim": aim,
+        "field_deg": field_deg, "pupil": [float(pupil[0, 0, 0, 0]), float(pupil[0, 0, 0, 1])],
+        "wavelength_nm": wavelength_nm, "aim": aim,
         "start": [float(v) for v in rays.pos.reshape(3)],
         "surfaces": surfaces,
         "image": {"x": float(img[0]), "y": float(img[1]), "z": float(img[2]),

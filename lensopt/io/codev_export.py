@@ -91,6 +91,10 @@ def export_codev(spec: LensSpec, *, private_catalog: bool = False) -> str:
     fo = first_order(model.lens, model.system)
     names, privates = _materials(model, private_catalog)
     extras: dict[str, Any] = {"aim": spec.system.aim}
+    if spec.system.aim_steps != 1:
+        extras["aim_steps"] = spec.system.aim_steps
+    if spec.system.front_aperture is not None:  # an object-space aperture: no CODE V command here
+        extras["front_aperture"] = spec.system.front_aperture.model_dump()
     lines = [f"! CODE V sequence file written by lensopt {__version__}: {spec.name}"]
     ref_nm = spec.spectrum.wavelengths_nm[spec.spectrum.reference_index]
     lines.append(

@@ -31,7 +31,7 @@ def system_from_codev(name: str, system: dict[str, tuple[Command, list[float]]],
 
     spectrum = _spectrum(system, err)
     obj: Any = "infinity" if object_distance is None else {"distance": object_distance}
-    aim = extras.get("aim") if extras.get("aim") in ("none", "chief") else "chief"
+    aim = extras.get("aim") if extras.get("aim") in ("none", "chief", "full") else "chief"
     data: dict[str, Any] = {
         "name": name,
         "system": {"aperture": {"epd": 1.0}, "field": {"hfov_deg": 1.0, "relative": [0.0]}, "object": obj,
@@ -40,6 +40,10 @@ def system_from_codev(name: str, system: dict[str, tuple[Command, list[float]]],
         "surfaces": surfaces,
         "image": {"defocus": defocus},
     }
+    if isinstance(extras.get("aim_steps"), int):
+        data["system"]["aim_steps"] = extras["aim_steps"]
+    if isinstance(extras.get("front_aperture"), dict):
+        data["system"]["front_aperture"] = extras["front_aperture"]
     if isinstance(extras.get("sensor"), dict):
         data["sensor"] = extras["sensor"]
     if isinstance(extras.get("rgb_weights"), list):

@@ -15,10 +15,11 @@ import torch
 from torch import Tensor
 
 from lensopt.optics.lens import Lens, System
+from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import launch
 from lensopt.optics.trace import trace
 
-__all__ = ["ChiefAim", "aim_chief"]
+__all__ = ["ChiefAim", "aim_chief", "PupilAim", "aim_full", "stop_radius"]
 
 
 @dataclass(frozen=True)
@@ -90,3 +91,164 @@ def _detach_lens(lens: Lens) -> Lens:
     """The same lens with every tensor detached (no gradient, no forward-mode tangent)."""
     names = ("curvature", "conic", "asphere", "phase", "thickness", "index", "wavelength_um", "semi_diameter")
     return Lens(shapes=lens.shapes, stop=lens.stop, **{n: getattr(lens, n).detach() for n in names})
+
+
+# ------------------------------------------------------------------------------- full aiming (S21–S22)
+
+MAX_AIM_STEP = 0.5
+"""Largest change of a relative pupil coordinate in one aiming step (a guard against wild steps)."""
+
+
+@dataclass(frozen=True)
+class PupilAim:
+    """Result of full ray aiming: the pupil ellipse whose marginal rays meet the stop edge.
+
+    Attributes:
+        factors: (F, W, 3) vignetting factors (V_i, V_s, V_l) relative to the paraxial entrance pupil
+            (S19–S20): the launched pupil spans y ∈ [−1 + V_i, 1 − V_s], x ∈ ±(1 − V_l). Negative
+            factors mean a real pupil larger than the paraxial one. Differentiable in the lens. Where
+            a marginal ray does not reach the stop after the last step, the chief-aimed unit circle.
+        chief: the chief-ray aiming.
+        stop_radius_mm: () semi-diameter of the stop filled by the on-axis beam (real marginal ray at
+            the reference wavelength, as in S1.3.2).
+        residual_mm: (F, W, 4) after aiming, stop misses of the inferior (y + r), superior (y − r) and
+            lateral (ρ − r) marginal rays and of the chief ray (y), mm; 0 where a ray failed.
+        traced: (F, W, 4) bool, whether those rays reached the stop.
+        converged: (F, W) bool, every residual below ``tol_mm`` and every ray traced.
+        steps: Newton steps taken (S21–S22 updates).
+        tol_mm: () the convergence tolerance used for ``converged``, mm.
+    """
+
+    factors: Tensor
+    chief: ChiefAim
+    stop_radius_mm: Tensor
+    residual_mm: Tensor
+    traced: Tensor
+    converged: Tensor
+    steps: int
+    tol_mm: Tensor
+
+
+def stop_radius(lens: Lens, system: System, *, epd: Tensor, entrance_pupil_z: Tensor) -> Tensor:
+    """() height on the stop of the real on-axis marginal ray (pupil (0, 1), reference wavelength), mm;
+    the paraxial marginal height when that ray fails."""
+    ref = system.reference
+    pupil = torch.zeros(1, lens.wavelength_um.shape[0], 1, 2, dtype=lens.dtype, device=lens.device)
+    pupil[..., 1] = 1.0
+    tan0 = torch.zeros(1, dtype=lens.dtype, device=lens.device)
+    hit = trace(lens, launch(lens, system, pupil, tan0, epd=epd, entrance_pupil_z=entrance_pupil_z), upto=lens.stop)
+    real = hit.pos[0, ref, 0, 1].abs()
+    return torch.where(hit.valid[0, ref, 0], real, first_order(lens, system).stop_semi_diameter)
+
+
+def aim_full(
+    lens: Lens,
+    system: System,
+    tan_field: Tensor,
+    *,
+    epd: Tensor,
+    entrance_pupil_z: Tensor,
+    steps: int = 1,
+    chief: ChiefAim | None = None,
+    tol_mm: float | None = None,
+) -> PupilAim:
+    """Full ray aiming (S1.3.2, S21–S22): pupil factors that put the marginal rays on the stop edge.
+
+    For every field and wavelength the inferior and superior meridional rays, launched at pupil
+    (0, y_lo) and (0, y_hi), are driven to y = −r and +r on the stop, and the lateral ray, launched at
+    (x_l, (y_lo + y_hi)/2) (where S19–S20 put the pupil point (1, 0)), to radius r; r is the stop
+    radius of the on-axis beam. Each step is S21–S22: Δu = −(stop − target) / (d stop / d u), with the
+    derivative by forward-mode autodiff, from the chief-aimed unit circle (y_c ± 1, 1). ``steps − 1``
+    steps run on detached values, the last on the attached lens, which makes the factors
+    differentiable (exactly so at convergence, by the implicit function theorem, as ``aim_chief``).
+
+    Args:
+        tan_field: (F,) object-space chief-ray slopes.
+        epd, entrance_pupil_z: paraxial entrance pupil diameter and position, mm.
+        steps: Newton steps (1 by default, as in the seed; more for strong pupil aberration).
+        chief: a chief-ray aiming already computed for these fields, else it is computed here.
+        tol_mm: tolerance of ``converged``, default 1e3·eps·(1 + EPD) mm.
+
+    Returns:
+        A ``PupilAim`` with the factors, residuals on the stop and convergence flags.
+    """
+    if steps < 1:
+        raise ValueError(f"steps must be ≥ 1, got {steps}")
+    if chief is None:
+        chief = aim_chief(lens, system, tan_field, epd=epd, entrance_pupil_z=entrance_pupil_z)
+    detached = _detach_lens(lens)
+    det_args = (detached, tan_field.detach(), epd.detach(), entrance_pupil_z.detach())
+    att_args = (lens, tan_field, epd, entrance_pupil_z)
+    radius = stop_radius(lens, system, epd=epd, entrance_pupil_z=entrance_pupil_z)
+    r_det = radius.detach()
+
+    def stop_hits(u: Tensor, y0: Tensor, args: tuple) -> tuple[Tensor, Tensor]:
+        """u: (F, W, 3) = (y_lo, y_hi, x_l), y0: (F, W) launch height of the lateral ray → stop
+        coordinates (y, y, ρ) of the three rays and their validity, (F, W, 3)."""
+        lens_, tan_, epd_, ep_z = args
+        zero = torch.zeros_like(y0)
+        pupil = torch.stack([torch.stack([zero, u[..., 0]], -1), torch.stack([zero, u[..., 1]], -1),
+                             torch.stack([u[..., 2], y0], -1)], -2)
+        hit = trace(lens_, launch(lens_, system, pupil, tan_, epd=epd_, entrance_pupil_z=ep_z), upto=lens_.stop)
+        rho = torch.sqrt((hit.pos[..., 2, :2] ** 2).sum(-1).clamp_min(torch.finfo(u.dtype).tiny))
+        return torch.stack([hit.pos[..., 0, 1], hit.pos[..., 1, 1], rho], -1), hit.valid
+
+    sign = torch.tensor([-1.0, 1.0, 1.0], dtype=lens.dtype, device=lens.device)
+
+    def newton(u: Tensor, args: tuple, r: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """Residuals, diagonal derivatives (one jvp: each ray depends on its own unknown once the
+        lateral ray's launch height y0 is held) and validity at u."""
+        y0 = 0.5 * (u[..., 0] + u[..., 1])
+        (g, valid), (dg, _) = torch.func.jvp(lambda v: stop_hits(v, y0, args), (u,), (torch.ones_like(u),))
+        return g - sign * r, dg, valid
+
+    y_c = chief.offset.detach()
+    u = torch.stack([y_c - 1.0, y_c + 1.0, torch.ones_like(y_c)], -1)
+    u_good = u.clone()
+    for _ in range(steps - 1):
+        res, slope, ok = newton(u, det_args, r_det)
+        good_slope = ok & (slope.abs() > 1e-12)
+        step = (res / torch.where(good_slope, slope, torch.ones_like(slope))).clamp(-MAX_AIM_STEP, MAX_AIM_STEP)
+        u_good = torch.where(ok, u, u_good)
+        # Where the ray failed, fall back half-way to the last point that traced.
+        u = torch.where(good_slope, u - step, torch.where(ok, u, 0.5 * (u + u_good)))
+    # Final step on the attached lens: meridional rays first, then the lateral ray launched at the
+    # attached y0, so that its derivative includes the coupling (exact at convergence).
+    res_d, slope, ok = newton(u, det_args, r_det)
+    good = ok & (slope.abs() > 1e-12)
+    safe_slope = torch.where(good, slope, torch.ones_like(slope))
+    full_step = good & ((res_d / safe_slope).abs() <= MAX_AIM_STEP)
+    fallback = torch.where(good, u - (res_d / safe_slope).clamp(-MAX_AIM_STEP, MAX_AIM_STEP),
+                           torch.where(ok, u, u_good))
+    g_att, _ = stop_hits(u, 0.5 * (u[..., 0] + u[..., 1]), att_args)
+    new = torch.where(full_step, u - (g_att - sign * radius) / safe_slope, fallback)
+    g_lat, _ = stop_hits(u, 0.5 * (new[..., 0] + new[..., 1]), att_args)
+    lat = torch.where(full_step[..., 2], u[..., 2] - (g_lat[..., 2] - radius) / safe_slope[..., 2], new[..., 2])
+    final = torch.stack([new[..., 0], new[..., 1], lat], -1)
+
+    # Report where the final marginal rays and the aimed chief ray meet the stop.
+    with torch.no_grad():
+        fin = final.detach()
+        g_fin, valid_fin = stop_hits(fin, 0.5 * (fin[..., 0] + fin[..., 1]), det_args)
+        res_fin = torch.where(valid_fin, g_fin - sign * r_det, torch.zeros_like(g_fin))
+        pupil = torch.stack([torch.zeros_like(y_c), chief.offset.detach()], -1).unsqueeze(-2)
+        hit = trace(detached, launch(detached, system, pupil, det_args[1], epd=det_args[2],
+                                     entrance_pupil_z=det_args[3]), upto=lens.stop)
+        chief_ok = hit.valid[..., 0]
+        chief_res = torch.where(chief_ok, hit.pos[..., 0, 1], torch.zeros_like(y_c))
+    residual = torch.cat([res_fin, chief_res.unsqueeze(-1)], -1)
+    traced = torch.cat([valid_fin, chief_ok.unsqueeze(-1)], -1)
+    eps = torch.finfo(lens.dtype).eps
+    tol = torch.as_tensor(tol_mm if tol_mm is not None else 1e3 * eps * (1.0 + epd.detach()), dtype=lens.dtype,
+                          device=lens.device)
+    converged = traced.all(-1) & (residual.abs() <= tol).all(-1)
+    y_lo, y_hi, x_l = final.unbind(-1)
+    factors = torch.stack([1.0 + y_lo, 1.0 - y_hi, 1.0 - x_l], -1)
+    # Where a marginal ray is lost at the end, the ellipse means nothing: fall back to the chief-aimed
+    # unit circle (the ``chief`` mode's pupil) for that field and wavelength.
+    lost = ~valid_fin.all(-1, keepdim=True)
+    offset = chief.offset
+    circle = torch.stack([offset, -offset, torch.zeros_like(offset)], -1)
+    factors = torch.where(lost, circle, factors)
+    return PupilAim(factors=factors, chief=chief, stop_radius_mm=radius, residual_mm=residual, traced=traced,
+                    converged=converged, steps=steps, tol_mm=tol)

@@ -1,24 +1,100 @@
-"""Trace a lens as a system: first-order data, field angles, pupil sampling, aiming, real rays.
+"""Trace a lens as a system: first-order data, field angles, pupil shaping (aiming, vignetting, front
+aperture), real rays.
 
 This is the entry point analysis and plots use: it ties ``paraxial`` (entrance pupil, EPD, field
-slopes), ``aiming`` and ``sampling.launch`` to ``trace``.
+slopes), ``aiming``, ``vignetting`` and ``sampling.launch`` to ``trace``.
+
+The launched pupil of each field and wavelength is an ellipse in relative entrance-pupil coordinates
+(S19–S20), built in three layers: the aimed pupil (``none``: the paraxial unit disc; ``chief``: the
+disc shifted so that the chief ray meets the stop centre; ``full``: the ellipse whose marginal rays
+meet the stop edge, S21–S22), then fixed factors taken relative to it (``system.vignetting``, as CODE V
+applies VUY/VLY/VUX with ray aiming), then the front aperture's cut (S1.3.2, S4.1.5). Rays that fall
+outside the front aperture anyway are marked ``Status.BLOCKED``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import torch
 from torch import Tensor
 
-from lensopt.optics.aiming import ChiefAim, aim_chief
+from lensopt.optics.aiming import ChiefAim, PupilAim, aim_chief, aim_full
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import FirstOrder, field_tangents, first_order
 from lensopt.optics.sampling import launch
-from lensopt.optics.trace import Rays, RayTrace, trace
-from lensopt.optics.vignetting import apply_vignetting
+from lensopt.optics.trace import Rays, RayTrace, Status, trace
+from lensopt.optics.vignetting import (
+    apply_vignetting,
+    clip_ellipse_to_disc,
+    compose_factors,
+    ellipse_to_factors,
+    factors_to_ellipse,
+    front_aperture_disc,
+    outside_front_aperture,
+)
 
-__all__ = ["Bundle", "trace_bundle"]
+__all__ = ["Bundle", "PupilShape", "pupil_shape", "trace_bundle", "AIM_MODES"]
+
+AIM_MODES = ("none", "chief", "full")
+
+
+@dataclass(frozen=True)
+class PupilShape:
+    """How the unit pupil is mapped for each field and wavelength.
+
+    Attributes:
+        factors: (F, W, 3) effective factors (V_i, V_s, V_l) relative to the paraxial entrance pupil,
+            or None when the pupil is the plain unit disc (no aiming, no vignetting).
+        chief: chief-ray aiming (modes ``chief`` and ``full``), else None.
+        full: full aiming (mode ``full``), else None.
+        blocked: (F, W) bool where the front aperture blocks the whole bundle, or None.
+    """
+
+    factors: Tensor | None
+    chief: ChiefAim | None
+    full: PupilAim | None
+    blocked: Tensor | None
+
+
+def pupil_shape(
+    lens: Lens,
+    system: System,
+    tan_field: Tensor,
+    fo: FirstOrder,
+    *,
+    aim: str,
+    aim_steps: int = 1,
+    vignetting: Tensor | None = None,
+) -> PupilShape:
+    """Aim, apply fixed factors ``vignetting`` ((F, W|1, 3) or None), cut by the front aperture."""
+    if aim not in AIM_MODES:
+        raise ValueError(f"aim must be one of {AIM_MODES}, got {aim!r}")
+    num_f, num_w = tan_field.shape[0], lens.wavelength_um.shape[0]
+    opts = {"epd": fo.epd, "entrance_pupil_z": fo.entrance_pupil_z}
+    chief = full = blocked = None
+    factors: Tensor | None = None
+    if aim in ("chief", "full"):
+        chief = aim_chief(lens, system, tan_field, **opts)
+        zero = torch.zeros_like(chief.offset)
+        factors = ellipse_to_factors(chief.offset, 1.0 + zero, 1.0 + zero)
+    if aim == "full":
+        full = aim_full(lens, system, tan_field, steps=aim_steps, chief=chief, **opts)
+        factors = full.factors
+    if vignetting is not None:
+        vignetting = vignetting.to(lens.dtype).expand(num_f, num_w, 3)
+        factors = vignetting if factors is None else compose_factors(factors, vignetting)
+    fa = system.front_aperture
+    if fa is not None:
+        if factors is None:
+            factors = torch.zeros(num_f, num_w, 3, dtype=lens.dtype, device=lens.device)
+        centre, radius = front_aperture_disc(fa.distance, fa.diameter, tan_field,
+                                             object_distance=system.object_distance, **opts)
+        ellipse, blocked = clip_ellipse_to_disc(factors_to_ellipse(factors), centre[:, None], radius,
+                                                lateral=fa.lateral)
+        factors = ellipse_to_factors(*ellipse)
+    return PupilShape(factors, chief, full, blocked)
 
 
 @dataclass(frozen=True)
@@ -34,6 +110,9 @@ class Bundle:
         result: the trace.
         aim: chief-ray aiming result, or None.
         half_pupil: True when only x ≥ 0 was sampled (x̄ = 0 by symmetry).
+        vignetting: (F, W, 3) effective factors (V_i, V_s, V_l) the pupil was launched with, relative
+            to the paraxial entrance pupil, or None for the plain unit disc.
+        pupil_aim: full-aiming result (mode ``full``), or None.
     """
 
     first_order: FirstOrder
@@ -44,6 +123,8 @@ class Bundle:
     result: RayTrace
     aim: ChiefAim | None
     half_pupil: bool
+    vignetting: Tensor | None = None
+    pupil_aim: PupilAim | None = None
 
 
 def trace_bundle(
@@ -57,36 +138,48 @@ def trace_bundle(
     record: bool = False,
     fo: FirstOrder | None = None,
     vignetting: Tensor | None = None,
+    aim_steps: int | None = None,
+    shape: PupilShape | None = None,
 ) -> Bundle:
     """Trace pupil points ``pupil`` ((P, 2) or (F, W, P, 2)) for every field and wavelength.
 
     Args:
         rel_field: (F,) relative fields; default: the system's.
-        aim: ``none`` or ``chief``; default: the system's.
+        aim: ``none``, ``chief`` or ``full``; default: the system's.
         record: keep per-surface hits (for constraints and layout plots).
         fo: precomputed first-order data (saves a paraxial trace).
-        vignetting: (F, W or 1, 3) factors (V_i, V_s, V_l) applied to the pupil (S19–S20); default:
-            the system's fixed factors when they match the fields, else none.
+        vignetting: (F, W or 1, 3) fixed factors (V_i, V_s, V_l) (S19–S20), relative to the aimed
+            pupil; default: the system's fixed factors when they match the fields, else none. The
+            front aperture (``system.front_aperture``) cuts the pupil after them.
+        aim_steps: Newton steps of ``full`` aiming; default: the system's.
+        shape: the pupil shape already computed by ``pupil_shape`` for these fields (saves aiming
+            again when several bundles share fields); ``aim``/``vignetting`` are then not used.
     """
     fo = first_order(lens, system) if fo is None else fo
     if rel_field is None:
         rel_field = torch.tensor(system.rel_field, dtype=lens.dtype, device=lens.device)
     tan = field_tangents(lens, system, rel_field)
     mode = system.aim if aim is None else aim
-    chief = None
     pupil = pupil.to(lens.dtype)
     if pupil.dim() == 2:
         pupil = pupil.expand(rel_field.shape[0], lens.wavelength_um.shape[0], *pupil.shape)
     if vignetting is None and system.vignetting and len(system.vignetting) == rel_field.shape[0]:
         vignetting = torch.tensor(system.vignetting, dtype=lens.dtype, device=lens.device).unsqueeze(1)
-    if vignetting is not None:
-        pupil = apply_vignetting(pupil, vignetting)
-    if mode == "chief":
-        chief = aim_chief(lens, system, tan, epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z)
-        shift = torch.stack([torch.zeros_like(chief.offset), chief.offset], -1).unsqueeze(-2)
-        pupil = pupil + shift
-    elif mode != "none":
-        raise ValueError(f"aim must be 'none' or 'chief', got {mode!r}")
+    if shape is None:
+        shape = pupil_shape(lens, system, tan, fo, aim=mode, vignetting=vignetting,
+                            aim_steps=system.aim_steps if aim_steps is None else aim_steps)
+    if shape.factors is not None:
+        pupil = apply_vignetting(pupil, shape.factors)
     rays = launch(lens, system, pupil, tan, epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z)
     result = trace(lens, rays, record=record)
-    return Bundle(fo, rel_field, tan, pupil, rays, result, chief, half_pupil)
+    fa = system.front_aperture
+    if fa is not None:
+        # Rays outside the opening (a field blocked entirely, or the corners of an ``extent`` ellipse)
+        # are stopped there first, whatever happens to them later.
+        pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
+        out = outside_front_aperture(pos, dir, fa.distance, fa.diameter)
+        if shape.blocked is not None:
+            out = out | shape.blocked[..., None]
+        status = torch.where(out, torch.full_like(result.status, int(Status.BLOCKED)), result.status)
+        result = dataclasses.replace(result, status=status)
+    return Bundle(fo, rel_field, tan, pupil, rays, result, shape.chief, half_pupil, shape.factors, shape.full)

@@ -14,7 +14,7 @@ from typing import Literal
 import torch
 from torch import Tensor
 
-__all__ = ["SurfaceShape", "Lens", "System"]
+__all__ = ["SurfaceShape", "Lens", "System", "FrontAperture"]
 
 ShapeKind = Literal["plane", "sphere", "conic", "asphere"]
 
@@ -94,6 +94,25 @@ class Lens:
 
 
 @dataclass(frozen=True)
+class FrontAperture:
+    """A circular mechanical aperture in object space (S1.3.2, S4.1.5), centred on the axis.
+
+    Attributes:
+        distance: axial position of its plane from the vertex of surface 1, mm (negative: before it).
+            It acts on the object-space rays (straight lines), so it must lie where the rays it blocks
+            have not yet met surface 1.
+        diameter: opening diameter, mm.
+        lateral: how the lateral factor V_l is chosen: ``inscribed`` (the seed's rule: the elliptical
+            bundle stays inside the unblocked part of the pupil) or ``extent`` (CODE V's: the ellipse
+            through the four extreme points of the unblocked part).
+    """
+
+    distance: float
+    diameter: float
+    lateral: Literal["inscribed", "extent"] = "inscribed"
+
+
+@dataclass(frozen=True)
 class System:
     """First-order specification that turns a lens into ray bundles (S1.3.1).
 
@@ -106,9 +125,12 @@ class System:
         object_distance: distance from the object to surface 1 in mm, None for infinity.
         wavelength_weights: (W,) spectral weights W_w.
         reference: index of the reference wavelength.
-        aim: ``none`` (fill the paraxial entrance pupil) or ``chief`` (chief ray through the stop centre).
+        aim: ``none`` (fill the paraxial entrance pupil), ``chief`` (chief ray through the stop centre) or
+            ``full`` (chief ray through the centre, marginal rays on the stop edge, S21–S22).
         field_weights: per-field weights for the effective spot radius (empty: uniform).
         vignetting: fixed vignetting factors (V_i, V_s, V_l) per field (S19–S20), or empty.
+        aim_steps: Newton steps of ``full`` aiming (S21–S22; 1 as in the seed).
+        front_aperture: an object-space aperture whose vignetting factors follow the lens, or None.
     """
 
     epd: float | None
@@ -119,9 +141,11 @@ class System:
     object_distance: float | None
     wavelength_weights: Tensor
     reference: int
-    aim: Literal["none", "chief"] = "none"
+    aim: Literal["none", "chief", "full"] = "none"
     field_weights: tuple[float, ...] = field(default=())
     vignetting: tuple[tuple[float, float, float], ...] = field(default=())
+    aim_steps: int = 1
+    front_aperture: FrontAperture | None = None
 
     @property
     def num_fields(self) -> int:

@@ -31,6 +31,7 @@ class Status(IntEnum):
     TIR = 2  # total internal reflection (or an evanescent diffraction order)
     NEWTON = 3  # Newton did not converge on an asphere
     CLIPPED = 4  # outside a clipping clear aperture
+    BLOCKED = 5  # stopped by the front aperture in object space (set by optics.bundle)
 
 
 _OK = int(Status.OK)
@@ -41,6 +42,7 @@ REASONS = {
     Status.TIR: "total internal reflection",
     Status.NEWTON: "Newton not converged",
     Status.CLIPPED: "clipped by aperture",
+    Status.BLOCKED: "blocked by front aperture",
 }
 
 

@@ -9,7 +9,7 @@ import torch
 
 from lensopt.errors import LensoptError
 from lensopt.materials import Material, ModelGlass, TabulatedGlass, material_from_name
-from lensopt.optics.lens import Lens, SurfaceShape, System
+from lensopt.optics.lens import FrontAperture, Lens, SurfaceShape, System
 from lensopt.spec.models import DiffractiveSurface, LensSpec, ModelGlassSpec, TabulatedGlassSpec, curvature_of
 
 __all__ = ["Model", "build", "resolve_material"]
@@ -103,6 +103,9 @@ def build(spec: LensSpec, *, dtype: torch.dtype = torch.float64, device: torch.d
         field_weights=tuple(fld.weights) if fld.weights is not None else (),
         vignetting=(tuple(zip(sysm.vignetting.inferior, sysm.vignetting.superior, sysm.vignetting.lateral,
                               strict=True)) if sysm.vignetting is not None else ()),
+        aim_steps=sysm.aim_steps,
+        front_aperture=(FrontAperture(sysm.front_aperture.distance, sysm.front_aperture.diameter,
+                                      sysm.front_aperture.lateral) if sysm.front_aperture is not None else None),
     )
     return Model(lens=lens, system=system, media=tuple(media), spec=spec)
 

@@ -19,6 +19,7 @@ __all__ = [
     "ObjectSpec",
     "SystemSpec",
     "VignettingSpec",
+    "FrontApertureSpec",
     "SpectrumSpec",
     "SensorSpec",
     "ModelGlassSpec",
@@ -115,12 +116,40 @@ class VignettingSpec(_Model):
         return self
 
 
+class FrontApertureSpec(_Model):
+    """A circular aperture in object space (S4.1.5): its plane lies ``distance`` mm after the vertex of
+    surface 1 (negative: before it), its opening is ``diameter`` mm. Its vignetting factors are computed
+    from the lens for every field (V_i, V_s by geometry; V_l ``inscribed``: the bundle stays inside the
+    unblocked pupil, as in the seed, or ``extent``: through its widest point, as CODE V's VUX/VLX)."""
+
+    distance: float
+    diameter: float = Field(gt=0)
+    lateral: Literal["inscribed", "extent"] = "inscribed"
+
+    @field_validator("distance")
+    @classmethod
+    def _finite(cls, v: float) -> float:
+        if not math.isfinite(v):
+            raise ValueError(f"must be a finite distance in mm (got {v})")
+        return v
+
+
 class SystemSpec(_Model):
     aperture: ApertureSpec
     field: FieldSpec
     object: ObjectSpec | Literal["infinity"] = "infinity"
-    aim: Literal["none", "chief"] = "none"
+    aim: Literal["none", "chief", "full"] = "none"
+    aim_steps: int = Field(default=1, ge=1, le=100)
     vignetting: VignettingSpec | None = None
+    front_aperture: FrontApertureSpec | None = None
+
+    @model_validator(mode="after")
+    def _front_aperture_after_object(self) -> SystemSpec:
+        fa, obj = self.front_aperture, self.object
+        if fa is not None and not isinstance(obj, str) and fa.distance <= -obj.distance:
+            raise ValueError(f"@front_aperture.distance: the aperture must lie after the object at "
+                             f"{-obj.distance:g} mm (got {fa.distance:g})")
+        return self
 
     @model_validator(mode="after")
     def _vignetting_per_field(self) -> SystemSpec:

@@ -143,7 +143,7 @@ def test_plot_interrupted_while_writing_leaves_no_file(tmp_path, monkeypatch):
 @pytest.mark.parametrize(("args", "message"), [
     (["plot", "fans", str(COOKE), "-o", "{tmp}/fans.txt"], "--output: expected an image file name"),
     (["plot", "spots", str(COOKE), "-o", "{tmp}/s.png", "--sampling", "hex:3"], "--sampling: expected rings:N"),
-    (["plot", "layout", str(COOKE), "-o", "{tmp}/l.png", "--aim", "full"], "--aim: must be none or chief"),
+    (["plot", "layout", str(COOKE), "-o", "{tmp}/l.png", "--aim", "sideways"], "--aim: must be none, chief or full"),
     (["plot", "layout", "{tmp}/missing.toml", "-o", "{tmp}/l.png"], "missing.toml: no such file"),
 ])
 def test_plot_bad_input_is_one_line_and_exit_2(args, message, tmp_path):

@@ -81,12 +81,15 @@ def test_imported_lens_traces_like_the_original(path: Path) -> None:
 @pytest.mark.parametrize("path", LENSES, ids=IDS)
 def test_the_codev_data_alone_define_the_same_lens(path: Path) -> None:
     # Without the "! lensopt:" comments only CODE V's own commands are read: private glasses become
-    # tabulated glasses, phases come from HCO, fields from YAN/YIM. The only setting CODE V has no
-    # command for is lensopt's aim mode (CODE V files default to chief-ray aiming).
+    # tabulated glasses, phases come from HCO, fields from YAN/YIM. The only settings CODE V has no
+    # command for are lensopt's aim mode and steps (CODE V files default to chief-ray aiming) and the
+    # object-space front aperture.
     spec = load_spec(path)
     for private in (False, True):
         imported = import_codev(_strip_comments(export_codev(spec, private_catalog=private))).spec
         imported.system.aim = spec.system.aim
+        imported.system.aim_steps = spec.system.aim_steps
+        imported.system.front_aperture = spec.system.front_aperture
         _assert_same_trace(spec, imported)
 
 

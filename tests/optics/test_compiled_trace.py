@@ -58,6 +58,8 @@ def test_compiled_equals_eager_with_every_failure_reason() -> None:
     eager = trace(lens, rays)
     # The case really covers every reason, and enough rays get through.
     for reason in REASONS:
+        if reason == Status.BLOCKED:  # set by optics.bundle (front aperture), never by trace itself
+            continue
         assert int((eager.status == reason).sum()) > 0, REASONS[reason]
     assert int((eager.status == Status.OK).sum()) > 150
     assert bool(eager.backtrack.any())

@@ -133,6 +133,11 @@ def optiland_trace(model: Model, bundle: Bundle) -> np.ndarray:
         o = optiland_lens(model, w)
         pos = bundle.rays.pos[:, w].expand(bundle.result.pos[:, w].shape).reshape(-1, 3).numpy()
         d = bundle.rays.dir[:, w].expand(bundle.result.pos[:, w].shape).reshape(-1, 3).numpy()
+        # optiland loses rays that start deep inside the lens (the wide-angle's entrance pupil lies 38 mm
+        # behind surface 1: 499 of 2880 rays came back NaN); moving the start back along the straight
+        # object-space ray to z = −1 mm changes nothing physically and optiland traces them all.
+        t = np.minimum(0.0, (-1.0 - pos[:, 2]) / d[:, 2])
+        pos = pos + t[:, None] * d
         n = pos.shape[0]
         rays = RealRays(*(np.ascontiguousarray(a) for a in (*pos.T, *d.T)), np.ones(n),
                         np.full(n, float(lens.wavelength_um[w])))
