@@ -81,6 +81,7 @@ def summary(result: OptimizeResult, start: dict[str, Any], final: dict[str, Any]
                            "material": b.material if isinstance(b.material, str) else b.material.model_dump(),
                            "distance": b.distance} for b in result.bound],
         "constraints": constraints,
+        "warning": result.warning,
         "history": [list(h) for h in result.history],
     }
 
@@ -112,3 +113,5 @@ def render_summary(console: Console, s: dict[str, Any]) -> None:
     mats = ", ".join(f"{m['material']} (nd {m['nd']:.5f}, vd {m['vd']:.2f})" for m in c["materials"])
     console.print(f"materials: {mats}")
     console.print("constraints satisfied: " + ("[green]yes[/]" if c["satisfied"] else "[red]no[/]"))
+    if s["warning"]:
+        console.print(f"[yellow]warning:[/] {s['warning']}")

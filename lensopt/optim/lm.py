@@ -4,12 +4,17 @@ Each step solves the damped linear least-squares problem (S63)
 
     min_δ ‖ℓ + J δ‖² + λ ‖D δ‖²
 
-as the augmented system [J; √λ D] δ = [−ℓ; 0] with an SVD-based least-squares solver, so a
-rank-deficient J (variables the merit does not see, or that act alike) gives the minimum-norm step
-instead of NaN. D is the running maximum of the column norms of J (S64), started from
+as an augmented least-squares system with an SVD-based solver (never the normal equations), so a
+rank-deficient J (variables the merit does not see, or that act alike) gives a finite step instead
+of NaN. D is the running maximum of the column norms of J (S64), started from
 max(‖J_n‖, ε) (S65). λ is divided by DF after a step that lowers the merit and multiplied by IF
 otherwise; a step whose merit exceeds TF times the current one, or that makes the lens non-physical,
 is rejected (the Jacobian is reused for the next try).
+
+Parameter evaporation (S2.3.2): besides the running-max D, columns of J whose norm is below
+``DEAD_COLUMN`` times the largest one are treated as exactly zero (their step is then exactly 0). Such
+columns carry only round-off (a variable the merit does not see, e.g. the radius of a surface between
+two identical media); with D at its floor ε even that noise would otherwise drive long random steps.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from lensopt.spec.optim import LMSpec
 __all__ = ["Trial", "StepInfo", "LevenbergMarquardt", "damped_step"]
 
 MIN_DAMPING = 1e-15
+DEAD_COLUMN = 1e-9
 
 
 @dataclass(frozen=True)
@@ -47,12 +53,24 @@ class StepInfo:
 
 
 def damped_step(J: Tensor, r: Tensor, D: Tensor, damping: float) -> Tensor:
-    """(N,) δ minimising ‖r + J δ‖² + λ‖D δ‖² through the augmented least-squares system."""
+    """(N,) δ minimising ‖r + J δ‖² + λ‖D δ‖² (S63) through the augmented least-squares system.
+
+    Solved in the scaled variables y = D δ, ``[J D⁻¹; √λ I] y = [−r; 0]`` (SVD-based ``gelsd`` on the
+    CPU, never the normal equations): the columns of J D⁻¹ have comparable norms and the singular
+    values stay ≥ √λ, so a rank-deficient J (two equal columns) still gives a finite step. Zero
+    columns (variables the merit does not see) are left out: their step is exactly 0.
+    """
     N = J.shape[1]
-    A = torch.cat([J, (damping**0.5) * torch.diag(D)])
-    b = torch.cat([-r, torch.zeros(N, dtype=r.dtype, device=r.device)])
+    live = torch.linalg.vector_norm(J, dim=0) > 0
+    Jl, Dl = J[:, live], D[live]
+    n = Jl.shape[1]
+    A = torch.cat([Jl / Dl, (damping**0.5) * torch.eye(n, dtype=J.dtype, device=J.device)])
+    b = torch.cat([-r, torch.zeros(n, dtype=r.dtype, device=r.device)])
     driver = "gelsd" if A.device.type == "cpu" else None
-    return torch.linalg.lstsq(A, b.unsqueeze(-1), driver=driver).solution.squeeze(-1)
+    y = torch.linalg.lstsq(A, b.unsqueeze(-1), driver=driver).solution.squeeze(-1)
+    step = torch.zeros(N, dtype=J.dtype, device=J.device)
+    step[live] = y / Dl
+    return step
 
 
 class LevenbergMarquardt:
@@ -107,6 +125,8 @@ class LevenbergMarquardt:
         s = self.settings
         self._ensure_jacobian(scale)
         J, r = scale[:, None] * self._J, scale * self._r
+        col = torch.linalg.vector_norm(J, dim=0)
+        J = torch.where(col > DEAD_COLUMN * col.max(), J, torch.zeros_like(J))
         merit = 0.5 * float((r**2).sum())
         delta = damped_step(J, r, self.D, self.damping)
         if not bool(torch.isfinite(delta).all()):

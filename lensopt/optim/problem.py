@@ -220,7 +220,7 @@ class Problem:
             elif group == "glass_catalog":
                 r = catalog_distance(self.param.glass_g(theta), self.space)
             else:
-                r = terms.failures(bundle, self.failure_penalty)
+                r = terms.failures(bundle, lens, self.failure_penalty)
             out[group] = r * w
         return out
 
@@ -262,6 +262,16 @@ class Problem:
         elif valid == 0.0:
             reason = "no ray reaches the image"
         return Evaluation(r, not reason, reason, valid)
+
+    def failure_summary(self, theta: Tensor) -> tuple[int, int, dict[str, int]]:
+        """(failed rays, rays, failed rays per reason) of the optimization rays at θ."""
+        from lensopt.optics.trace import REASONS
+
+        with torch.no_grad():
+            lens, _ = self.lens(theta)
+            status = self.bundle(lens).result.status
+        counts = {REASONS[r]: int((status == r).sum()) for r in REASONS if bool((status == r).any())}
+        return int((status != 0).sum()), int(status.numel()), counts
 
     def check(self, theta: Tensor) -> str:
         """Why the lens of θ is non-physical ("" when it is fine); paraxial only, no ray trace."""

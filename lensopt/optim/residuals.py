@@ -27,6 +27,7 @@ __all__ = [
     "surface_normal",
     "distortion",
     "relative_illumination",
+    "failure_margin",
     "failures",
 ]
 
@@ -109,9 +110,61 @@ def relative_illumination(bundle: Bundle, wavelength_weights: Tensor, minimum: f
     return _ramp(minimum - r) / math.sqrt(r.shape[0])
 
 
-def failures(bundle: Bundle, penalty_mm: float) -> Tensor:
-    """(n_r,) ``penalty_mm``/√n_r for every failed ray, 0 for the others (constant: no gradient, but
-    a step that fails rays raises the merit and is rejected)."""
+def failure_margin(bundle: Bundle, lens: Lens) -> Tensor:
+    """(F, W, P) how far each failed ray is from passing (dimensionless, ≥ 0; 0 for valid rays), at
+    the surface where it failed (needs ``record=True``):
+
+    - total internal reflection: −cos²θ' there (cos²θ' < 0 on TIR);
+    - missed surface: the larger of (1 + κ) c² h² − 1, with h the ray's height on the vertex plane
+      (beyond the conic's rim), and c² d² − 1, with d the distance of the ray's line from the centre
+      of curvature (a line that passes the sphere by);
+    - clipped: h²/sd² − 1 with h the height on the surface.
+    Other failures (Newton, grazing the image) get 0 and cost only the constant.
+    """
+    from lensopt.optics.trace import Status
+
+    res = bundle.result
+    at = res.failed_at
+    margin = torch.zeros_like(res.pos[..., 0])
+    if at is None or not res.hits:
+        return margin
+    vertex = lens.vertex_z()
+    start = bundle.rays.pos.expand_as(res.pos)
+    for s in range(lens.num_surfaces):
+        here = at == s
+        h = res.hits[s]
+        prev = start if s == 0 else res.hits[s - 1].pos
+        dz = h.dir_in[..., 2]
+        safe = torch.where(dz.abs() > 1e-12, dz, torch.ones_like(dz))
+        t = (vertex[s] - prev[..., 2]) / safe
+        xy = prev[..., :2] + t.unsqueeze(-1) * h.dir_in[..., :2]
+        u_plane = (xy**2).sum(-1)
+        c = lens.curvature[s]
+        missed = (1.0 + lens.conic[s]) * c**2 * u_plane - 1.0
+        centre = 1.0 / torch.where(c != 0, c, torch.ones_like(c))
+        to_centre = torch.stack(
+            [-prev[..., 0], -prev[..., 1], vertex[s] + centre - prev[..., 2]], -1)
+        d2 = (torch.linalg.cross(to_centre, h.dir_in) ** 2).sum(-1)
+        missed = torch.maximum(missed, torch.where(c != 0, c**2 * d2 - 1.0, torch.zeros_like(d2)))
+        tir = -h.cos2_out
+        sd2 = lens.semi_diameter[s] ** 2
+        u_hit = (h.pos[..., :2] ** 2).sum(-1)
+        clipped = u_hit / torch.where(sd2 > 0, sd2, torch.ones_like(sd2)) - 1.0
+        m = torch.where(res.status == Status.TIR, tir, torch.zeros_like(tir))
+        m = torch.where(res.status == Status.MISSED, missed, m)
+        m = torch.where(res.status == Status.CLIPPED, clipped, m)
+        margin = torch.where(here, _ramp(m), margin)
+    return margin
+
+
+def failures(bundle: Bundle, lens: Lens, penalty_mm: float) -> Tensor:
+    """(n_r,) ``penalty_mm (1 + margin)/√n_r`` for every failed ray, 0 for the others.
+
+    The constant makes any step that fails rays raise the merit (so it is rejected); the margin
+    (``failure_margin``) gives failed rays a gradient towards passing, so a start with many failed
+    rays can recover.
+    """
     res = bundle.result
     bad = (~res.valid).to(res.pos.dtype)
-    return (bad * penalty_mm).reshape(-1) / math.sqrt(res.status.numel())
+    margin = failure_margin(bundle, lens)
+    return (bad * penalty_mm * (1.0 + margin)).reshape(-1) / math.sqrt(res.status.numel())

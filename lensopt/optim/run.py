@@ -69,6 +69,7 @@ class OptimizeResult:
         bound: glasses bound to the catalog.
         history: (step, elapsed s, merit, ESR µm) per step.
         start_esr_um, start_merit: at the start point.
+        warning: set when optimization rays still fail at the end (how many, why).
     """
 
     spec: LensSpec
@@ -82,6 +83,7 @@ class OptimizeResult:
     start_esr_um: float = float("nan")
     start_merit: float = float("nan")
     elapsed_s: float = 0.0
+    warning: str = ""
 
 
 def make_optimizer(problem: Problem, theta: torch.Tensor, method: str) -> LevenbergMarquardt | AdamOptimizer:
@@ -167,6 +169,11 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
     result.problem = problem
     result.theta = state.theta
     result.spec = to_spec(problem, result.theta)
+    failed, rays, reasons = problem.failure_summary(result.theta)
+    if failed:
+        why = ", ".join(f"{k}: {v}" for k, v in reasons.items())
+        result.warning = (f"{failed} of {rays} optimization rays still fail ({why}); the start may be too "
+                          "far from a working lens: change it, or run more steps")
     result.elapsed_s = time.perf_counter() - t0
     return result
 
