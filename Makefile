@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 TORCH_PIN := torch==2.13.0
 
-.PHONY: install demo test lint clean
+.PHONY: install demo test test-external lint clean
 
 install: $(STAMP)
 
@@ -17,16 +17,35 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q -e '.[dev,oracle]'
 	touch $(STAMP)
 
+DEMO_SPEC := specs/cooke_triplet.toml
+DEMO := out/cooke_triplet
+
 demo: install
 	mkdir -p out
-	$(VENV)/bin/lensopt trace specs/cooke_triplet.toml
-	$(VENV)/bin/lensopt trace specs/cooke_triplet.toml --json > out/cooke_triplet_trace.json
-	$(VENV)/bin/lensopt plot layout specs/cooke_triplet.toml -o out/cooke_triplet_layout.png
-	$(VENV)/bin/lensopt plot fans specs/cooke_triplet.toml -o out/cooke_triplet_fans.png
-	$(VENV)/bin/lensopt plot spots specs/cooke_triplet.toml -o out/cooke_triplet_spots.png
+	$(VENV)/bin/lensopt trace $(DEMO_SPEC)
+	$(VENV)/bin/lensopt trace $(DEMO_SPEC) --json > $(DEMO)_trace.json.part && mv $(DEMO)_trace.json.part $(DEMO)_trace.json
+	$(VENV)/bin/lensopt plot layout $(DEMO_SPEC) -o $(DEMO)_layout.png
+	$(VENV)/bin/lensopt plot fans $(DEMO_SPEC) -o $(DEMO)_fans.png
+	$(VENV)/bin/lensopt plot spots $(DEMO_SPEC) -o $(DEMO)_spots.png
+	@echo "demo outputs: $(DEMO)_trace.json $(DEMO)_layout.png $(DEMO)_fans.png $(DEMO)_spots.png"
 
 test: install
 	$(PY) -m pytest -q
+
+# Optional: lensopt's CODE V export read back by rayoptics (Python >= 3.12, large install, no torch),
+# in its own venv. Set PY312 to a Python 3.12+ interpreter if python3.12 is not on the PATH.
+PY312 ?= $(shell command -v python3.12 || command -v python3.13)
+EXT_VENV := tests/external/.venv
+RAYOPTICS_PIN := rayoptics==0.9.10
+
+$(EXT_VENV)/.installed:
+	$(PY312) -m venv $(EXT_VENV)
+	$(EXT_VENV)/bin/python -m pip install -q --upgrade pip
+	$(EXT_VENV)/bin/python -m pip install -q $(RAYOPTICS_PIN)
+	touch $@
+
+test-external: install $(EXT_VENV)/.installed
+	$(PY) -m pytest -q -s tests/external/check_rayoptics.py
 
 lint: install
 	$(VENV)/bin/ruff check lensopt tests benchmarks

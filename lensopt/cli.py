@@ -8,6 +8,7 @@ from __future__ import annotations
 import functools
 import json
 import logging
+import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -96,19 +97,24 @@ def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None,
 
 
 def _render_trace(r: dict[str, Any]) -> None:
+    ref = r["wavelengths_nm"].index(r["reference_nm"])
+    console.print(f"[bold]{r['name']}[/]")
+    console.print(_prescription_table(r["surfaces"], ref, r["reference_nm"]))
     fo = r["first_order"]
-    t = Table(title=f"{r['name']} — first-order data (reference {r['reference_nm']:g} nm)", show_header=False)
-    labels = {"efl": "EFL", "bfl": "BFL", "ffl": "FFL (front focus from S1)", "epd": "EPD",
-              "entrance_pupil_z": "entrance pupil z (from S1)", "exit_pupil_z": "exit pupil z (from S1)",
-              "exit_pupil_diameter": "exit pupil diameter", "fnumber": "f-number (EFL/EPD)",
-              "working_fnumber": "working f-number", "paraxial_image_height": "paraxial image height",
-              "total_track": "total track"}
+    t = Table(title=f"first-order data ({r['reference_nm']:g} nm)", title_justify="left")
+    t.add_column("quantity")
+    t.add_column("value", justify="right")
+    t.add_column("unit")
+    labels = {"efl": "EFL", "bfl": "BFL (last surface to focus)", "ffl": "FFL (front focus from S1)",
+              "epd": "EPD", "entrance_pupil_z": "entrance pupil z (from S1)",
+              "exit_pupil_z": "exit pupil z (from S1)", "exit_pupil_diameter": "exit pupil diameter",
+              "fnumber": "f-number (EFL/EPD)", "working_fnumber": "working f-number",
+              "paraxial_image_height": "paraxial image height", "total_track": "total track"}
     for key, label in labels.items():
-        unit = "" if "fnumber" in key else " mm"
-        t.add_row(label, f"{fo[key]:.6f}{unit}")
+        t.add_row(label, f"{fo[key]:.6f}", "" if "fnumber" in key else "mm")
     console.print(t)
     wl = r["wavelengths_nm"]
-    s = Table(title=f"RMS spot radius (µm), sampling {r['sampling']}, aim {r['aim']}")
+    s = Table(title=f"RMS spot radius (µm), sampling {r['sampling']}, aim {r['aim']}", title_justify="left")
     s.add_column("field °", justify="right")
     for w in wl:
         s.add_column(f"{w:g} nm", justify="right")
@@ -133,6 +139,31 @@ def _render_trace(r: dict[str, Any]) -> None:
         console.print("ray failures: " + ", ".join(f"{k}: {v}" for k, v in failures.items()))
     else:
         console.print("ray failures: none")
+
+
+def _prescription_table(surfaces: list[dict[str, Any]], ref: int, ref_nm: float) -> Table:
+    """The resolved prescription as traced: one row per surface (the ``surfaces`` of ``trace --json``)."""
+    t = Table(title="prescription (lengths in mm)", title_justify="left")
+    for col, just in (("surf", "right"), ("type", "left"), ("radius", "right"), ("thickness", "right"),
+                      ("material", "left"), (f"n {ref_nm:g} nm", "right"), ("semi-diam.", "right"),
+                      ("notes", "left")):
+        t.add_column(col, justify=just)  # type: ignore[arg-type]
+    for i, sf in enumerate(surfaces, start=1):
+        radius = "inf" if math.isinf(sf["radius"]) else f"{sf['radius']:.6f}"
+        notes = []
+        if sf["stop"]:
+            notes.append("stop")
+        if sf["conic"]:
+            notes.append(f"k={sf['conic']:g}")
+        if sf["asphere"]:
+            notes.append("asph " + " ".join(f"a{p}={v:.4g}" for p, v in sf["asphere"].items()))
+        if "diffractive" in sf:
+            d = sf["diffractive"]
+            notes.append("DOE " + " ".join(f"d{p}={v:.4g}" for p, v in d.items() if p.isdigit())
+                         + f" @{d['design_wavelength_nm']:g} nm m={d['order']}")
+        t.add_row(str(i), sf["type"], radius, f"{sf['thickness']:.6f}", sf["material"],
+                  f"{sf['index'][ref]:.6f}", f"{sf['semi_diameter']:.4f}", ", ".join(notes))
+    return t
 
 
 # ------------------------------------------------------------------------------------------- ray
@@ -174,6 +205,129 @@ def ray(
     console.print(t)
     console.print(f"status: {r['status']}" + (" (backtracking flagged)" if r["backtracking"] else ""))
 
+
+# ------------------------------------------------------------------------------------------ plot
+
+OutOpt = Annotated[Path, typer.Option("--output", "-o",
+                                      help="Image file (.png, .pdf, .svg, .jpg; the suffix picks the format).")]
+DpiOpt = Annotated[int, typer.Option("--dpi", min=30, max=1200, help="Resolution of raster images.")]
+
+
+def _titles(model: Model) -> tuple[str, str]:
+    """Figure title and a one-line first-order summary."""
+    from lensopt.optics.paraxial import first_order
+
+    fo = first_order(model.lens, model.system)
+    s = model.system
+    field = (f"HFOV {s.field_max:g}°" if s.field_type == "angle" else f"image height {s.field_max:g} mm")
+    wl = "/".join(f"{w:g}" for w in model.spec.spectrum.wavelengths_nm)
+    return model.spec.name, f"EFL {float(fo.efl):.3f} mm · f/{float(fo.fnumber):.2f} · {field} · {wl} nm"
+
+
+def _check_output(path: Path) -> Path:
+    if path.suffix.lower() not in (".png", ".pdf", ".svg", ".jpg", ".jpeg"):
+        raise LensoptError("expected an image file name ending in .png, .pdf, .svg or .jpg",
+                           path="--output", got=str(path))
+    return path
+
+
+@plot_app.command("layout")
+@handle_errors
+def plot_layout_cmd(lens: LensArg, output: OutOpt, aim: AimOpt = None,
+                    rays: Annotated[int, typer.Option("--rays", min=2, max=101,
+                                                      help="Meridional rays per field.")] = 7,
+                    dpi: DpiOpt = 150) -> None:
+    """2D meridional layout: elements, stop, image plane and traced rays per field."""
+    from lensopt.analysis.layout import layout
+    from lensopt.plot import plot_layout, save_figure
+
+    out = _check_output(output)
+    model = load_model(lens)
+    data = layout(model, aim=check_aim(aim), rays_per_field=rays)
+    title, sub = _titles(model)
+    save_figure(plot_layout(data, title=title, subtitle=sub), out, dpi=dpi)
+    err_console.print(f"wrote {output}")
+
+
+@plot_app.command("fans")
+@handle_errors
+def plot_fans_cmd(lens: LensArg, output: OutOpt, aim: AimOpt = None,
+                  points: Annotated[int, typer.Option("--points", min=3, max=2001,
+                                                      help="Rays per fan.")] = 101,
+                  dpi: DpiOpt = 150) -> None:
+    """Tangential and sagittal ray fans per field, one curve per wavelength (S1.3.4)."""
+    import torch
+
+    from lensopt.analysis.fans import ray_fans
+    from lensopt.plot import plot_fans, save_figure
+
+    out = _check_output(output)
+    model = load_model(lens)
+    with torch.no_grad():
+        fans = ray_fans(model.lens, model.system, points=points, aim=check_aim(aim))
+    title, sub = _titles(model)
+    save_figure(plot_fans(fans, title=title, subtitle=sub), out, dpi=dpi)
+    err_console.print(f"wrote {output}")
+
+
+@plot_app.command("spots")
+@handle_errors
+def plot_spots_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings:24", aim: AimOpt = None,
+                   seed: SeedOpt = 0, dpi: DpiOpt = 150) -> None:
+    """Spot diagram per field, colour per wavelength, RMS radius and Airy disc."""
+    import torch
+
+    from lensopt.analysis.spot_diagram import spot_diagram
+    from lensopt.plot import plot_spots, save_figure
+
+    out = _check_output(output)
+    model = load_model(lens)
+    pupil = PupilSampling.parse(sampling, seed=seed, path="--sampling")
+    with torch.no_grad():
+        spots = spot_diagram(model.lens, model.system, pupil, aim=check_aim(aim))
+    title, sub = _titles(model)
+    save_figure(plot_spots(spots, title=title, subtitle=sub), out, dpi=dpi)
+    err_console.print(f"wrote {output}")
+
+
+# ----------------------------------------------------------------------------------------- codev
+
+OutputOpt = Annotated[Path, typer.Option("--output", "-o", help="Output file.")]
+
+
+@app.command("export-codev")
+@handle_errors
+def export_codev(
+    lens: LensArg,
+    output: OutputOpt,
+    private_catalog: Annotated[bool, typer.Option(
+        "--private-catalog", help="Write every glass as a private catalog of lensopt's indices.")] = False,
+) -> None:
+    """Write the lens as a CODE V sequence file (.seq)."""
+    from lensopt.io.codev_export import write_codev
+
+    write_codev(load_spec(lens), output, private_catalog=private_catalog)
+    err_console.print(f"wrote {output}", highlight=False)
+
+
+@app.command("import-codev")
+@handle_errors
+def import_codev(
+    seq: Annotated[Path, typer.Argument(help="CODE V sequence file (.seq).")],
+    output: OutputOpt,
+) -> None:
+    """Read a CODE V sequence file into a lensopt lens (.json)."""
+    from lensopt.io.codev_import import read_codev
+    from lensopt.spec.io import save_json
+
+    if output.suffix.lower() != ".json":
+        raise LensoptError("the imported lens is written as JSON; name it *.json", path="--output",
+                           got=str(output))
+    result = read_codev(seq)
+    for warning in result.warnings:
+        err_console.print(f"[yellow]warning:[/] {warning}", markup=True, highlight=False, soft_wrap=True)
+    save_json(result.spec, output)
+    err_console.print(f"wrote {output}", highlight=False)
 
 # -------------------------------------------------------------------------------------- optimize
 

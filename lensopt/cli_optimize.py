@@ -41,6 +41,8 @@ class LiveProgress:
 
     def __call__(self, p: Progress) -> None:
         self.last = p
+        if self.live is None and p.step == 1:
+            self.console.print("running… (Ctrl-C keeps the best lens so far)", highlight=False)
         if p.event and p.event != "merit rose":
             self.events.append(f"step {p.step}: {p.event}")
         now = time.monotonic()

@@ -29,7 +29,9 @@ def trace_report(model: Model, sampling: PupilSampling, *, aim: str | None = Non
         fo = first_order(lens, system)
         bundle = trace_bundle(lens, system, sampling.points(dtype=lens.dtype), half_pupil=sampling.half,
                               aim=aim, fo=fo)
-        stats = spot_stats(bundle, system.wavelength_weights)
+        field_weights = (torch.tensor(system.field_weights, dtype=lens.dtype, device=lens.device)
+                         if system.field_weights else None)
+        stats = spot_stats(bundle, system.wavelength_weights, field_weights)
         chief = trace_bundle(lens, system, torch.zeros(1, 2, dtype=lens.dtype), aim=aim, fo=fo)
         sd = auto_semi_diameters(model, aim=aim)
     ref = system.reference
@@ -120,7 +122,11 @@ def auto_semi_diameters(model: Model, *, aim: str | None = None, n: int = 21) ->
 def ray_report(
     model: Model, *, field_deg: float, px: float, py: float, wavelength_nm: float, aim: str = "none"
 ) -> dict[str, Any]:
-    """One real ray, surface by surface (like CODE V's RSI): position, direction cosines, angles."""
+    """One real ray, surface by surface (like CODE V's RSI): position, direction cosines, angles.
+
+    The ray is launched like the rays of ``trace_bundle``: relative pupil coordinates on the system's
+    paraxial entrance pupil (reference wavelength), whatever ``wavelength_nm`` is.
+    """
     spec = model.spec.model_copy(deep=True)
     spec.spectrum = spec.spectrum.model_copy(update={
         "wavelengths_nm": [wavelength_nm], "weights": None, "reference_nm": None, "rgb_weights": None})
@@ -128,7 +134,9 @@ def ray_report(
     lens, system = single.lens, single.system
     tan = torch.tensor([math.tan(math.radians(field_deg))], dtype=lens.dtype)
     with torch.no_grad():
-        fo = first_order(lens, system)
+        # The entrance pupil (position, diameter) is the system's, at its reference wavelength, for
+        # every wavelength, exactly as in ``trace_bundle``; not the paraxial pupil of the ray's own one.
+        fo = first_order(model.lens, model.system)
         pupil = torch.tensor([[[[px, py]]]], dtype=lens.dtype)
         offset = 0.0
         if aim == "chief":

@@ -27,7 +27,7 @@ from lensopt.materials.dispersion import (
     hartmann_index,
     normal_pgf,
 )
-from lensopt.materials.material import Air, CatalogGlass, Material, ModelGlass, material_from_name
+from lensopt.materials.material import Air, CatalogGlass, Material, ModelGlass, TabulatedGlass, material_from_name
 
 __all__ = [
     "Air",
@@ -44,6 +44,7 @@ __all__ = [
     "LINE_G_UM",
     "Material",
     "ModelGlass",
+    "TabulatedGlass",
     "VENDORS",
     "catalog_index",
     "design_catalog",

@@ -25,6 +25,7 @@ __all__ = [
     "Air",
     "CatalogGlass",
     "ModelGlass",
+    "TabulatedGlass",
     "MODEL_ND_RANGE",
     "MODEL_VD_RANGE",
     "MODEL_DPGF_RANGE",
@@ -206,6 +207,82 @@ class ModelGlass(Material):
         _check_wavelength_tensor(wavelength_um)
         a, b, c = self._abc
         return a + c / (wavelength_um - b)
+
+
+@dataclass(frozen=True)
+class TabulatedGlass(Material):
+    """A glass given by indices at a few wavelengths (e.g. a CODE V private catalog entry).
+
+    The index is exact at the tabulated wavelengths and a not-a-knot cubic spline in λ between them
+    (linear for two points, constant for one; the scheme scipy's ``interp1d(kind="cubic")`` and
+    rayoptics use for such data). Valid only inside the tabulated range.
+
+    Attributes:
+        name: display name (``"E48"``).
+        wavelengths_um: strictly increasing wavelengths, µm.
+        indices: refractive index at each wavelength.
+    """
+
+    name: str
+    wavelengths_um: tuple[float, ...]
+    indices: tuple[float, ...]
+    nd: float = field(default=math.nan, init=False)
+    vd: float = field(default=math.nan, init=False)
+    valid_range_um: tuple[float, float] = field(default=(0.0, 0.0), init=False)
+    _poly: tuple[tuple[float, ...], ...] = field(default=(), init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        wl = tuple(float(w) for w in self.wavelengths_um)
+        n = tuple(float(x) for x in self.indices)
+        if not wl or len(wl) != len(n):
+            raise MaterialError(f"tabulated glass {self.name}: needs as many indices as wavelengths",
+                                got=(len(wl), len(n)))
+        if any(not (math.isfinite(w) and w > 0) for w in wl) or any(b <= a for a, b in zip(wl, wl[1:], strict=False)):
+            raise MaterialError(f"tabulated glass {self.name}: wavelengths must be positive and increasing",
+                                got=wl)
+        if any(not (math.isfinite(x) and x > 0) for x in n):
+            raise MaterialError(f"tabulated glass {self.name}: indices must be positive", got=n)
+        object.__setattr__(self, "wavelengths_um", wl)
+        object.__setattr__(self, "indices", n)
+        object.__setattr__(self, "valid_range_um", (wl[0], wl[-1]))
+        object.__setattr__(self, "_poly", _spline_pieces(wl, n))
+        if wl[0] <= 0.4861327 and wl[-1] >= 0.6562725:
+            nd, nf, nc = (float(self.index(torch.tensor(w, dtype=torch.float64)))
+                          for w in (0.5875618, 0.4861327, 0.6562725))
+            object.__setattr__(self, "nd", nd)
+            object.__setattr__(self, "vd", (nd - 1.0) / (nf - nc) if nf != nc else math.inf)
+
+    @property
+    def label(self) -> str:
+        return f"{self.name} (tabulated)"
+
+    def index(self, wavelength_um: Tensor) -> Tensor:
+        """``(*)`` spline index at ``wavelength_um`` (µm); exactly the tabulated value at a node."""
+        _check_wavelength_tensor(wavelength_um)
+        opts = {"dtype": wavelength_um.dtype, "device": wavelength_um.device}
+        nodes = torch.tensor(self.wavelengths_um, **opts)
+        coef = torch.tensor(self._poly, **opts)  # (K, 4): c0 + c1 t + c2 t² + c3 t³, t = λ − λ_k
+        k = (torch.searchsorted(nodes, wavelength_um.detach().contiguous(), right=True) - 1)
+        k = k.clamp(0, coef.shape[0] - 1)
+        t = wavelength_um - nodes[k]
+        c = coef[k]
+        value = c[..., 0] + t * (c[..., 1] + t * (c[..., 2] + t * c[..., 3]))
+        for w, n in zip(self.wavelengths_um, self.indices, strict=True):
+            value = torch.where(wavelength_um == w, torch.full_like(value, n), value)
+        return value
+
+
+def _spline_pieces(wl: tuple[float, ...], n: tuple[float, ...]) -> tuple[tuple[float, ...], ...]:
+    """Polynomial pieces (c0, c1, c2, c3) in t = λ − λ_k of the interpolant of (wl, n)."""
+    if len(wl) == 1:
+        return ((n[0], 0.0, 0.0, 0.0),)
+    if len(wl) == 2:
+        return ((n[0], (n[1] - n[0]) / (wl[1] - wl[0]), 0.0, 0.0),)
+    from scipy.interpolate import CubicSpline
+
+    spline = CubicSpline(wl, n, bc_type="not-a-knot")
+    # scipy stores c[m, k] for (λ − λ_k)^(3 − m); reorder to ascending powers.
+    return tuple(tuple(float(spline.c[3 - p, k]) for p in range(4)) for k in range(len(wl) - 1))
 
 
 def material_from_name(name: str) -> Material:

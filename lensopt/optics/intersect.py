@@ -55,8 +55,16 @@ def intersect_quadric(pos: Tensor, dir: Tensor, c: Tensor, k: Tensor) -> tuple[T
     hit = hit & (q.abs() > torch.finfo(q.dtype).eps)
     # The sag formula's branch satisfies (1 + κ) c z ≤ 1; the far side of a sphere/ellipsoid and the
     # second sheet of a hyperboloid do not.
-    z = pz + t * dz
-    hit = hit & (rho * c * z <= 1.0)
+    on_sheet = rho * c * (pz + t * dz) <= 1.0
+    # The other root, q / a. C / q is the root continuous with the plane as c → 0, but when the ray
+    # starts beyond the centre of curvature (b < 0 with the ray going forward, e.g. rays launched
+    # on an entrance pupil that lies behind surface 1's centre) C / q is the far side of the sphere
+    # and the sag-branch crossing is q / a.
+    t_other = _safe_div(q, a)
+    other_ok = (a.abs() > torch.finfo(a.dtype).eps) & (rho * c * (pz + t_other * dz) <= 1.0)
+    use_other = hit & ~on_sheet & other_ok
+    t = torch.where(use_other, t_other, t)
+    hit = hit & (on_sheet | other_ok)
     return torch.where(hit, t, torch.zeros_like(t)), hit
 
 

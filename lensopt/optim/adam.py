@@ -85,7 +85,7 @@ class AdamOptimizer:
             merit = self.history[-1] if self.history else float("nan")
             return StepInfo(False, merit, self.damping, reason)
         loss.backward()
-        merit = float(loss)
+        merit = float(loss.detach())
         self._r = r.detach()
         self._previous = self._param.detach().clone()
         if self._param.grad is not None:

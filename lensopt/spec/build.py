@@ -8,9 +8,9 @@ from dataclasses import dataclass
 import torch
 
 from lensopt.errors import LensoptError
-from lensopt.materials import Material, ModelGlass, material_from_name
+from lensopt.materials import Material, ModelGlass, TabulatedGlass, material_from_name
 from lensopt.optics.lens import Lens, SurfaceShape, System
-from lensopt.spec.models import DiffractiveSurface, LensSpec, ModelGlassSpec, curvature_of
+from lensopt.spec.models import DiffractiveSurface, LensSpec, ModelGlassSpec, TabulatedGlassSpec, curvature_of
 
 __all__ = ["Model", "build", "resolve_material"]
 
@@ -32,11 +32,13 @@ class Model:
     spec: LensSpec
 
 
-def resolve_material(value: str | ModelGlassSpec, *, path: str) -> Material:
+def resolve_material(value: str | ModelGlassSpec | TabulatedGlassSpec, *, path: str) -> Material:
     """Material object for a spec's ``material`` value; errors name ``path``."""
     try:
         if isinstance(value, ModelGlassSpec):
             return ModelGlass(value.nd, value.vd, value.dpgf, name=value.name)
+        if isinstance(value, TabulatedGlassSpec):
+            return TabulatedGlass(value.name, tuple(w * 1e-3 for w in value.wavelengths_nm), tuple(value.index))
         return material_from_name(value)
     except LensoptError as err:
         raise err.at(path) from None

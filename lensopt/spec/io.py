@@ -72,7 +72,8 @@ def format_loc(loc: tuple[Any, ...]) -> str:
     return out
 
 
-_UNION_TAGS = {"plane", "sphere", "conic", "asphere", "diffractive", "str", "ModelGlassSpec", "ObjectSpec"}
+_UNION_TAGS = {"plane", "sphere", "conic", "asphere", "diffractive", "str", "ModelGlassSpec", "TabulatedGlassSpec",
+               "ObjectSpec"}
 
 
 def _to_spec_error(err: ValidationError) -> SpecError:
@@ -101,7 +102,13 @@ def _to_spec_error(err: ValidationError) -> SpecError:
 
 def _most_specific(errors: list[dict[str, Any]]) -> dict[str, Any]:
     """Prefer errors that are not the catch-all alternatives of a union (``material`` as str/dict)."""
-    for e in errors:
-        if not any(str(p) in ("str", "literal['infinity']") for p in e["loc"]):
-            return e
-    return errors[0]
+    candidates = [e for e in errors if not any(str(p) in ("str", "literal['infinity']") for p in e["loc"])]
+    if not candidates:
+        return errors[0]
+    # A material dict is tried as a model glass, then as a tabulated glass: report the alternative
+    # with a real complaint rather than the other one's missing/unknown fields.
+    if any("TabulatedGlassSpec" in str(p) for e in candidates for p in e["loc"]):
+        real = [e for e in candidates if e["type"] not in ("missing", "extra_forbidden")]
+        if real:
+            return real[0]
+    return candidates[0]

@@ -24,6 +24,7 @@ __all__ = [
     "SpectrumSpec",
     "SensorSpec",
     "ModelGlassSpec",
+    "TabulatedGlassSpec",
     "PlaneShape",
     "SphereShape",
     "ConicShape",
@@ -198,12 +199,32 @@ class ModelGlassSpec(_Model):
     """A model glass dispersed by the Hartmann formula (S3–S7) from n_d, V_d and ΔP_g,F."""
 
     nd: float = Field(gt=1.0, lt=3.0)
-    vd: float = Field(gt=5.0, lt=150.0)
+    vd: float = Field(ge=10.0, le=120.0)
     dpgf: float = Field(default=0.0, ge=-0.1, le=0.1)
     name: str | None = None
 
 
-MaterialSpec = Annotated[str | ModelGlassSpec, Field(union_mode="left_to_right")]
+class TabulatedGlassSpec(_Model):
+    """A glass given by its indices at a few wavelengths (nm), e.g. a CODE V private catalog entry:
+    exact at those wavelengths, a cubic spline between them, valid only inside their range."""
+
+    name: str
+    wavelengths_nm: list[float] = Field(min_length=1)
+    index: list[float] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> TabulatedGlassSpec:
+        if len(self.index) != len(self.wavelengths_nm):
+            raise ValueError(f"@index: needs one index per wavelength ({len(self.wavelengths_nm)})")
+        if any(not (w > 0 and math.isfinite(w)) for w in self.wavelengths_nm) or any(
+                b <= a for a, b in zip(self.wavelengths_nm, self.wavelengths_nm[1:], strict=False)):
+            raise ValueError(f"@wavelengths_nm: must be positive and increasing (got {self.wavelengths_nm})")
+        if any(not (x > 0 and math.isfinite(x)) for x in self.index):
+            raise ValueError(f"@index: indices must be positive (got {self.index})")
+        return self
+
+
+MaterialSpec = Annotated[str | ModelGlassSpec | TabulatedGlassSpec, Field(union_mode="left_to_right")]
 
 
 # ------------------------------------------------------------------------------- surface shapes
