@@ -360,7 +360,7 @@ def optimize(
     sampling = PupilSampling.parse("rings:24", seed=seed)
     final_problem = Problem(result.spec, seed=seed)
     s = summary(result, trace_report(build(start_spec), sampling), trace_report(build(result.spec), sampling),
-                constraint_report(final_problem, final_problem.theta0), str(output))
+                constraint_report(final_problem, final_problem.theta0, sampling), str(output))
     if as_json:
         print_json(s)
     else:

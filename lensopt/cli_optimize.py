@@ -100,7 +100,7 @@ def render_summary(console: Console, s: dict[str, Any]) -> None:
                   f"paraxial image height {fo['paraxial_image_height']:.4f} mm")
     c = s["constraints"]
     if "gaps" in c:
-        t = Table(title="ray path per gap (mm; valid rays)", header_style="bold")
+        t = Table(title=f"ray path per gap (mm; {c['sampling']}, valid rays)", header_style="bold")
         for col in ("gap", "kind", "centre", "min t_z", "max t_z", "bounds", "ok"):
             t.add_column(col, justify="right")
         for g in c["gaps"]:

@@ -32,6 +32,7 @@ from lensopt.optim.glass import (
     mesh_distance,
     schedule_weight,
 )
+from lensopt.optim.rays import head, with_rim
 from lensopt.optim.solves import apply_solves, resolve_solves, solved_quantities
 from lensopt.optim.variables import Parameterization
 from lensopt.spec.models import LensSpec
@@ -100,7 +101,8 @@ class Problem:
         if self.space is not None and cons.glass_mesh is not None:
             self.mesh = glass_mesh(self.space, cons.glass_mesh.max_edge)
         self.sampling = PupilSampling.parse(self.opt.sampling, seed=seed, path="optimize.sampling")
-        self.pupil = self.sampling.points(dtype=dtype)
+        self.num_spot = self.sampling.points(dtype=dtype).shape[0]
+        self.pupil = with_rim(self.sampling.points(dtype=dtype), self.opt.rim_rays, half=self.sampling.half)
         fw = self.system.field_weights or (1.0,) * self.system.num_fields
         self.field_weights = torch.tensor(fw, dtype=dtype)
         lens0 = self.model.lens
@@ -194,16 +196,19 @@ class Problem:
         return self._terms(theta, lens, self.bundle(lens))
 
     def _terms(self, theta: Tensor, lens: Lens, bundle: Bundle) -> dict[str, Tensor]:
+        """Spot terms (TRA, distortion, illumination) from the spot sample; geometric constraints and
+        failures from every ray, the rim rays included."""
         cons = self.opt.constraints
         ww = self.system.wavelength_weights
-        stats = spot_stats(bundle, ww, self.field_weights)
+        spot = head(bundle, self.num_spot)
+        stats = spot_stats(spot, ww, self.field_weights)
         out: dict[str, Tensor] = {}
         for group in GROUPS:
             w = self._weight(group)
             if w is None:
                 continue
             if group == "tra":
-                r = terms.tra(bundle, stats, ww, self.field_weights)
+                r = terms.tra(spot, stats, ww, self.field_weights)
             elif group == "ray_path":
                 r = terms.ray_path(bundle, *self.gap_bounds(lens))
             elif group == "ray_angle":
@@ -212,9 +217,9 @@ class Problem:
                 refracting = [s for s in self.interfaces if not self.spec.surfaces[s].type == "plane"]
                 r = terms.surface_normal(bundle, refracting, cons.surface_normal.max_deg)
             elif group == "distortion":
-                r = terms.distortion(lens, self.system, bundle, stats, cons.distortion.max_percent / 100)
+                r = terms.distortion(lens, self.system, spot, stats, cons.distortion.max_percent / 100)
             elif group == "relative_illumination":
-                r = terms.relative_illumination(bundle, ww, cons.relative_illumination.min)
+                r = terms.relative_illumination(spot, ww, cons.relative_illumination.min)
             elif group == "glass_mesh":
                 r = mesh_distance(self.param.glass_g(theta), self.mesh)
             elif group == "glass_catalog":

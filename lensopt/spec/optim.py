@@ -210,6 +210,8 @@ class OptimizeSpec(_Model):
     Attributes:
         alpha: scale factor α of the variables (mm); default EPD/2 (S2.1).
         sampling: pupil sampling of the optimization rays (``rings:N`` or ``grid:N``).
+        rim_rays: extra rays per field and wavelength on the pupil rim (top, lateral, bottom and
+            between) for the geometric constraints and failures; not part of the spot size.
         asphere_basis: ``monomial`` (a'_2i = α^2i a_2i) or ``bezier`` (Bernstein control points of
             the same polynomial, a linear re-parameterization, S2.1.3).
         catalog: design catalog of the glass variables: ohara-recommended | schott-preferred |
@@ -223,6 +225,7 @@ class OptimizeSpec(_Model):
 
     alpha: float | None = Field(default=None, gt=0)
     sampling: str = "rings:6"
+    rim_rays: int = Field(default=9, ge=0, le=64)
     asphere_basis: Literal["monomial", "bezier"] = "monomial"
     catalog: str = "ohara-recommended"
     glass_parameters: Literal[2, 3] = 3

@@ -10,6 +10,7 @@ import torch
 from lensopt.analysis.spot import spot_stats
 from lensopt.materials import material_from_name
 from lensopt.optim import Problem
+from lensopt.optim.rays import head
 from lensopt.spec import parse_spec
 
 
@@ -32,6 +33,7 @@ def test_tra_norm_is_the_effective_spot_radius(make_cooke) -> None:  # noqa: ANN
     data["system"]["field"]["weights"] = [1.0, 2.0, 0.5]
     data["spectrum"]["weights"] = [0.5, 1.0, 0.7]
     data["surfaces"][0]["vary"] = ["radius"]
+    data["optimize"]["rim_rays"] = 0
     p = Problem(parse_spec(data))
     lens, _ = p.lens(p.theta0)
     b = p.bundle(lens)
@@ -39,6 +41,11 @@ def test_tra_norm_is_the_effective_spot_radius(make_cooke) -> None:  # noqa: ANN
     r = p.terms(p.theta0)["tra"]
     assert float(torch.linalg.vector_norm(r)) == pytest.approx(float(stats.effective_radius), rel=1e-13)
     assert r.shape[0] == 2 * b.result.status.numel()
+    # The rim rays (for the geometric constraints) do not enter the spot terms.
+    data["optimize"]["rim_rays"] = 7
+    with_rim = Problem(parse_spec(data))
+    assert with_rim.pupil.shape[0] == p.pupil.shape[0] + 7
+    torch.testing.assert_close(with_rim.terms(with_rim.theta0)["tra"], r, rtol=0, atol=0)
 
 
 def test_ray_angle_residual_at_a_plane_face_has_the_closed_form() -> None:
@@ -89,7 +96,7 @@ def test_distortion_and_failure_terms(make_cooke) -> None:  # noqa: ANN001
     data["surfaces"][0]["vary"] = ["radius"]
     p = Problem(parse_spec(data))
     lens, _ = p.lens(p.theta0)
-    b = p.bundle(lens)
+    b = head(p.bundle(lens), p.num_spot)  # the spot sample, without the rim rays
     d = distortion(lens, p.system, b, spot_stats(b, p.system.wavelength_weights, p.field_weights))
     t = p.terms(p.theta0)
     expected = torch.clamp_min(d.abs() - 5e-4, 0.0) / math.sqrt(3)
