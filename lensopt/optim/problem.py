@@ -242,13 +242,26 @@ class Problem:
         J, r = torch.func.jacfwd(both, has_aux=True)(theta)
         return J, r
 
+    def schedules(self) -> dict[str, list[tuple[float, float]]]:
+        """Weight schedules of the active groups (the glass-catalog one, and any group's own)."""
+        out = {}
+        for name in self.slices:
+            spec = self.opt.tra if name == "tra" else getattr(self.opt.constraints, name, None)
+            knots = getattr(spec, "schedule", None)
+            if knots:
+                out[name] = list(knots)
+        return out
+
     def row_scale(self, fraction: float) -> Tensor:
-        """(M,) time-varying multipliers: the glass-catalog schedule at ``fraction`` of the run."""
+        """(M,) time-varying multipliers of the residual rows at ``fraction`` of the run."""
         scale = torch.ones(self.size, dtype=self.dtype)
-        cat = self.opt.constraints.glass_catalog
-        if "glass_catalog" in self.slices and cat is not None:
-            scale[self.slices["glass_catalog"]] = schedule_weight(cat.schedule, fraction)
+        for name, knots in self.schedules().items():
+            scale[self.slices[name]] = schedule_weight(knots, fraction)
         return scale
+
+    def schedules_settled(self, fraction: float) -> bool:
+        """Whether every weight schedule has reached its final value (the merit no longer changes)."""
+        return all(schedule_weight(k, fraction) == schedule_weight(k, 1.0) for k in self.schedules().values())
 
     # ---------------------------------------------------------------------------- step acceptance
 

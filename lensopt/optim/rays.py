@@ -1,6 +1,6 @@
-"""The optimization rays: the spot-size sample plus rays on the pupil rim, which probe the geometric
-constraints where they bind (edge thicknesses, steepest angles: the beam's rim), and the part of a
-bundle that makes the spot."""
+"""The optimization rays: the spot-size sample plus probe rays on the pupil rim and at its centre,
+where the geometric constraints bind (edge thicknesses and the steepest angles at the beam's rim,
+centre thicknesses on its axis), and the part of a bundle that makes the spot."""
 
 from __future__ import annotations
 
@@ -30,8 +30,11 @@ def rim_points(n: int, *, half: bool, dtype: torch.dtype) -> Tensor:
 
 
 def with_rim(points: Tensor, n: int, *, half: bool) -> Tensor:
-    """(P + n, 2): the sample followed by ``n`` rim points."""
-    return torch.cat([points, rim_points(n, half=half, dtype=points.dtype)])
+    """(P + n + 1, 2): the sample, ``n`` rim points and the pupil centre (nothing added for n = 0)."""
+    if n == 0:
+        return points
+    centre = torch.zeros(1, 2, dtype=points.dtype)
+    return torch.cat([points, rim_points(n, half=half, dtype=points.dtype), centre])
 
 
 def head(bundle: Bundle, n: int) -> Bundle:

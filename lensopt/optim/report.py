@@ -54,7 +54,7 @@ def constraint_report(problem: Problem, theta: torch.Tensor, sampling: PupilSamp
         tz = gap_lengths(bundle)
         big = torch.tensor(BIG, dtype=tz.dtype)
         out: dict[str, Any] = {"failed_rays": int((~valid).sum()), "rays": int(valid.numel()),
-                               "sampling": f"{sampling or problem.sampling} + {problem.opt.rim_rays} rim rays"}
+                               "sampling": f"{sampling or problem.sampling} + {problem.opt.rim_rays} rim rays + centre"}
         ok = out["failed_rays"] == 0
         if cons.ray_path is not None:
             lo, hi = problem.gap_bounds(lens)

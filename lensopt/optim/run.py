@@ -12,7 +12,6 @@ import torch
 
 from lensopt.errors import LensoptError
 from lensopt.optim.adam import AdamOptimizer
-from lensopt.optim.glass import schedule_weight
 from lensopt.optim.lm import LevenbergMarquardt, Trial
 from lensopt.optim.problem import Problem
 from lensopt.optim.writeback import BoundGlass, bind_glasses, to_spec
@@ -124,7 +123,6 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
                             start_esr_um=1e3 * problem.esr_mm(start.residuals),
                             start_merit=0.5 * float(((scale0 * start.residuals) ** 2).sum()))
     bind_step = round(opt.bind_at * total) if problem.num_glasses and opt.bind_at < 1 else None
-    schedule = opt.constraints.glass_catalog.schedule if opt.constraints.glass_catalog else [(0.0, 1.0)]
     state = make_optimizer(problem, problem.theta0, method)
     phase = "glasses free" if problem.num_glasses else "fixed glasses"
     failing = 1.0 - start.valid_fraction
@@ -151,7 +149,7 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
                                   info.accepted, {n: m / tot for n, m in merits.items()},
                                   _valid_fraction(problem, r), event or info.reason, elapsed))
             event = ""
-            flat = schedule_weight(schedule, frac) == schedule_weight(schedule, 1.0) or not problem.num_glasses
+            flat = problem.schedules_settled(frac)
             reason = state.stop_reason()
             if reason and (flat or reason.startswith("damping")):
                 if bind_step is not None and not result.bound:

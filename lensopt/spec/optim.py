@@ -71,8 +71,31 @@ class SolveSpec(_Model):
 # ------------------------------------------------------------------------------------------ terms
 
 
+def _check_knots(v: list[tuple[float, float]] | None) -> list[tuple[float, float]] | None:
+    if v is None:
+        return v
+    for frac, weight in v:
+        if not 0.0 <= frac <= 1.0:
+            raise ValueError(f"schedule fractions must lie in [0, 1] (got {frac})")
+        if not weight > 0:
+            raise ValueError(f"schedule weights must be positive (got {weight})")
+    if any(b[0] < a[0] for a, b in zip(v, v[1:], strict=False)):
+        raise ValueError("schedule fractions must be increasing")
+    return v
+
+
 class _Weighted(_Model):
+    """``weight`` of the group; ``schedule`` (optional) multiplies it over the run: (fraction of the
+    steps, multiplier) knots, log-linear in between, flat outside (e.g. ``[[0.0, 0.01], [0.5, 1.0]]``
+    enforces a constraint gently while glasses are free and fully after binding)."""
+
     weight: float = Field(default=1.0, ge=0)
+    schedule: list[tuple[float, float]] | None = Field(default=None, min_length=1)
+
+    @field_validator("schedule")
+    @classmethod
+    def _knots(cls, v: list[tuple[float, float]] | None) -> list[tuple[float, float]] | None:
+        return _check_knots(v)
 
 
 class TraSpec(_Weighted):
@@ -146,14 +169,7 @@ class GlassCatalogSpec(_Model):
     @field_validator("schedule")
     @classmethod
     def _knots(cls, v: list[tuple[float, float]]) -> list[tuple[float, float]]:
-        for frac, weight in v:
-            if not 0.0 <= frac <= 1.0:
-                raise ValueError(f"schedule fractions must lie in [0, 1] (got {frac})")
-            if not weight > 0:
-                raise ValueError(f"schedule weights must be positive (got {weight})")
-        if any(b[0] < a[0] for a, b in zip(v, v[1:], strict=False)):
-            raise ValueError("schedule fractions must be increasing")
-        return v
+        return _check_knots(v)
 
 
 class RayFailureSpec(_Model):
@@ -211,7 +227,8 @@ class OptimizeSpec(_Model):
         alpha: scale factor α of the variables (mm); default EPD/2 (S2.1).
         sampling: pupil sampling of the optimization rays (``rings:N`` or ``grid:N``).
         rim_rays: extra rays per field and wavelength on the pupil rim (top, lateral, bottom and
-            between) for the geometric constraints and failures; not part of the spot size.
+            between), plus one at the pupil centre, for the geometric constraints and failures; not
+            part of the spot size (0: none).
         asphere_basis: ``monomial`` (a'_2i = α^2i a_2i) or ``bezier`` (Bernstein control points of
             the same polynomial, a linear re-parameterization, S2.1.3).
         catalog: design catalog of the glass variables: ohara-recommended | schott-preferred |

@@ -44,7 +44,7 @@ def test_tra_norm_is_the_effective_spot_radius(make_cooke) -> None:  # noqa: ANN
     # The rim rays (for the geometric constraints) do not enter the spot terms.
     data["optimize"]["rim_rays"] = 7
     with_rim = Problem(parse_spec(data))
-    assert with_rim.pupil.shape[0] == p.pupil.shape[0] + 7
+    assert with_rim.pupil.shape[0] == p.pupil.shape[0] + 7 + 1  # rim rays and the centre
     torch.testing.assert_close(with_rim.terms(with_rim.theta0)["tra"], r, rtol=0, atol=0)
 
 
