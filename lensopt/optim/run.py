@@ -187,6 +187,8 @@ def _valid_fraction(problem: Problem, r: torch.Tensor | None) -> float:
 def _bind(problem: Problem, state, result: OptimizeResult, method: str, seed: int):  # noqa: ANN001, ANN202
     """Bind glasses to the catalog, rebuild the problem without glass variables, reset the optimizer."""
     spec, bound = bind_glasses(problem, state.theta)
+    if spec.optimize is not None and spec.optimize.sampling_after_binding:
+        spec.optimize = spec.optimize.model_copy(update={"sampling": spec.optimize.sampling_after_binding})
     new = Problem(spec, seed=seed)
     ev = new.evaluate(new.theta0)
     if not ev.physical:

@@ -226,6 +226,8 @@ class OptimizeSpec(_Model):
     Attributes:
         alpha: scale factor α of the variables (mm); default EPD/2 (S2.1).
         sampling: pupil sampling of the optimization rays (``rings:N`` or ``grid:N``).
+        sampling_after_binding: the sampling from the binding of the glasses on (a finer one polishes
+            the final design at a higher cost per step); default: ``sampling``.
         rim_rays: extra rays per field and wavelength on the pupil rim (top, lateral, bottom and
             between), plus one at the pupil centre, for the geometric constraints and failures; not
             part of the spot size (0: none).
@@ -242,6 +244,7 @@ class OptimizeSpec(_Model):
 
     alpha: float | None = Field(default=None, gt=0)
     sampling: str = "rings:6"
+    sampling_after_binding: str | None = None
     rim_rays: int = Field(default=9, ge=0, le=64)
     asphere_basis: Literal["monomial", "bezier"] = "monomial"
     catalog: str = "ohara-recommended"
@@ -255,9 +258,11 @@ class OptimizeSpec(_Model):
     lm: LMSpec = Field(default_factory=LMSpec)
     adam: AdamSpec = Field(default_factory=AdamSpec)
 
-    @field_validator("sampling")
+    @field_validator("sampling", "sampling_after_binding")
     @classmethod
-    def _sampling(cls, v: str) -> str:
+    def _sampling(cls, v: str | None) -> str | None:
+        if v is None:
+            return v
         m = re.fullmatch(r"(rings|grid):(\d+)(:nojitter)?", v.strip())
         if not m or int(m.group(2)) < 1 or (m.group(1) == "grid" and m.group(3)):
             raise ValueError(f"expected rings:N, rings:N:nojitter or grid:N with N ≥ 1 (got {v!r})")
