@@ -27,7 +27,10 @@ demo: install
 	$(VENV)/bin/lensopt plot layout $(DEMO_SPEC) -o $(DEMO)_layout.png
 	$(VENV)/bin/lensopt plot fans $(DEMO_SPEC) -o $(DEMO)_fans.png
 	$(VENV)/bin/lensopt plot spots $(DEMO_SPEC) -o $(DEMO)_spots.png
-	@echo "demo outputs: $(DEMO)_trace.json $(DEMO)_layout.png $(DEMO)_fans.png $(DEMO)_spots.png"
+	$(VENV)/bin/lensopt plot psf $(DEMO_SPEC) -o $(DEMO)_psf.png --pitch-um 2 --sqrt
+	$(VENV)/bin/lensopt simulate $(DEMO_SPEC) lensopt/imaging/data/coffee.png --region corner \
+		-o out/coffee_cooke_corner.png
+	@echo "demo outputs: $(DEMO)_trace.json $(DEMO)_layout.png $(DEMO)_fans.png $(DEMO)_spots.png $(DEMO)_psf.png out/coffee_cooke_corner.png"
 
 test: install
 	$(PY) -m pytest -q

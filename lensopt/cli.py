@@ -25,7 +25,7 @@ from lensopt.spec import Model, build, load_spec
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Differentiable lens design: trace, plot, optimize, simulate, export.")
-plot_app = typer.Typer(no_args_is_help=True, help="Figures: layout, ray fans, spot diagrams.")
+plot_app = typer.Typer(no_args_is_help=True, help="Figures: layout, ray fans, spot diagrams, PSFs.")
 app.add_typer(plot_app, name="plot")
 
 # Wide enough for the tables when stdout is a pipe or a file (rich would assume 80 columns).
@@ -182,10 +182,14 @@ def ray(
     """One real ray, surface by surface: position, direction cosines, angles (like CODE V's RSI)."""
     from lensopt.analysis.report import ray_report
 
+    if not (math.isfinite(field) and abs(field) < 90.0):
+        raise LensoptError("must be a field angle in degrees, strictly between -90 and 90", path="--field", got=field)
+    if not all(math.isfinite(p) for p in pupil):
+        raise LensoptError("must be two finite relative pupil coordinates", path="--pupil", got=pupil)
     model = load_model(lens)
     if wavelength is None:
         wavelength = model.spec.spectrum.wavelengths_nm[model.system.reference]
-    if not wavelength > 0:
+    if not (math.isfinite(wavelength) and wavelength > 0):
         raise LensoptError("must be a positive wavelength in nm", path="--wavelength", got=wavelength)
     r = ray_report(model, field_deg=field, px=pupil[0], py=pupil[1], wavelength_nm=wavelength,
                    aim=check_aim(aim) or model.system.aim)
@@ -367,6 +371,101 @@ def optimize(
         render_summary(console, s)
     if result.interrupted:
         raise typer.Exit(130)
+
+
+# -------------------------------------------------------------------------------------- simulate
+
+
+@app.command()
+@handle_errors
+def simulate(
+    lens: LensArg,
+    image: Annotated[Path, typer.Argument(help="Scene image (PNG/JPEG/TIFF/EXR; 8/16-bit files are sRGB).")],
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="Simulated image (format from suffix).")] = None,
+    region: Annotated[str | None, typer.Option("--region", help="Where the image lies on the sensor: "
+                                               "x0,y0,w,h | full | center | corner | tile:C,R/NCxNR.")] = None,
+    effects: Annotated[str | None, typer.Option("--effects", help="Force effects: +name / -name / noise=σ; names: "
+                                                "convolution, diffraction, distortion, ri, noise.")] = None,
+    reference: Annotated[Path | None, typer.Option("--reference", help="Image to score the result against "
+                                                   "(PSNR/SSIM); default: the input scene.")] = None,
+    plan_only: Annotated[bool, typer.Option("--plan", help="Print the plan and stop (nothing simulated).")] = False,
+    rays: Annotated[str, typer.Option("--rays", help="Pupil sampling per PSF (rings:N = 2N² rays).")] = "rings:32",
+    kernel: Annotated[str, typer.Option("--kernel", help="count | triangular | cosine (S1.4).")] = "triangular",
+    grid: Annotated[str | None, typer.Option("--grid", help="Force the PSF grid, e.g. 5x4.")] = None,
+    overlap: Annotated[float, typer.Option("--overlap", help="Overlap of patches (S1.5.2).")] = 0.25,
+    seed: SeedOpt = 0,
+    as_json: JsonOpt = False,
+) -> None:
+    """Simulate a scene through the lens, computing only the effects the scene calls for."""
+    from lensopt.imaging.commands import parse_grid, run_simulate
+
+    if not plan_only and output is None:
+        raise LensoptError("needed unless --plan", path="--output")
+    if not 0.0 <= overlap < 1.0:
+        raise LensoptError("must lie in [0, 1)", path="--overlap", got=overlap)
+    result = run_simulate(load_model(lens), image, output, region=region, effects=effects, reference=reference,
+                          plan_only=plan_only, sampling=rays, kernel=kernel, grid=parse_grid(grid), overlap=overlap,
+                          seed=seed, on_plan=None if as_json else _render_plan)
+    if as_json:
+        print_json(result)
+    elif not plan_only:
+        _render_run(result)
+
+
+def _render_plan(p: dict[str, Any]) -> None:
+    t = Table(title=f"plan — {p['lens']}: {p['image']['width']}×{p['image']['height']} "
+                    f"{'/'.join(p['channels'])} ({p['image']['encoding']}) on region {p['region']['name']} "
+                    f"({p['region']['w']:.0f}×{p['region']['h']:.0f} sensor px, image pixel {p['pixel_um']:.2f} µm)",
+              show_header=False)
+    t.add_row("wavelengths", ", ".join(f"{w:g}" for w in p["wavelengths_nm"]) + " nm")
+    t.add_row("fields traced", ", ".join(f"{f:.2f}°" for f in p["fields_deg"]) or "none")
+    grid = p["psf_grid"]
+    t.add_row("PSF grid", f"{grid[0]}×{grid[1]}, overlap {p['overlap']:.0%}" if grid else "none")
+    ps = p["psf"]
+    t.add_row("PSFs", f"{ps['sampling']}, {ps['kernel']} kernel, bins {ps['pitch_um']:.2f} µm"
+                      + (", resized to the image pixel" if ps["resize_to_pixel"] else ""))
+    for name, e in p["effects"].items():
+        t.add_row(name, f"[{'green' if e['on'] else 'dim'}]{'on' if e['on'] else 'off'}[/] — {e['reason']}")
+    for note in p["notes"]:
+        t.add_row("note", note)
+    console.print(t)
+
+
+def _render_run(r: dict[str, Any]) -> None:
+    t = Table(title="stages")
+    t.add_column("stage")
+    t.add_column("s", justify="right")
+    for k, v in r["timings"].items():
+        t.add_row(k, f"{v:.3f}")
+    console.print(t)
+    m = r.get("metrics")
+    if m:
+        console.print(f"vs {m['against']}: PSNR {m['psnr_db']:.2f} dB, SSIM {m['ssim']:.4f} ({m['space']})")
+    console.print(f"wrote {r['output']} ({r['output_encoding']}; input {r['input_encoding']})")
+
+
+# ------------------------------------------------------------------------------------- plot psf
+
+
+@plot_app.command("psf")
+@handle_errors
+def plot_psf(
+    lens: LensArg,
+    output: Annotated[Path, typer.Option("--output", "-o", help="Figure file (png, pdf, svg).")],
+    rays: Annotated[str, typer.Option("--rays", help="Pupil sampling per PSF.")] = "rings:32",
+    kernel: Annotated[str, typer.Option("--kernel", help="count | triangular | cosine.")] = "triangular",
+    diffraction: Annotated[str, typer.Option("--diffraction", help="heuristic | none | incoherent.")] = "heuristic",
+    pitch_um: Annotated[float | None, typer.Option("--pitch-um", help="Bin size (default: sensor pitch, "
+                                                   "else 1 µm).")] = None,
+    sqrt: Annotated[bool, typer.Option("--sqrt", help="Square-root intensity scale (shows the tails).")] = False,
+    seed: SeedOpt = 0,
+) -> None:
+    """RGB PSFs across the field (the spec's fields)."""
+    from lensopt.imaging.commands import plot_psfs
+
+    plot_psfs(load_model(lens), output, sampling=rays, kernel=kernel, diffraction=diffraction, pitch_um=pitch_um,
+              sqrt=sqrt, seed=seed)
+    console.print(f"wrote {output}")
 
 
 if __name__ == "__main__":  # pragma: no cover

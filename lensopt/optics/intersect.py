@@ -27,8 +27,11 @@ def _safe_div(num: Tensor, den: Tensor) -> Tensor:
 def intersect_quadric(pos: Tensor, dir: Tensor, c: Tensor, k: Tensor) -> tuple[Tensor, Tensor]:
     """Distance along the ray to the conic ``c(x² + y²) + c(1 + κ) z² − 2z = 0`` (plane when c = 0).
 
-    Uses the root that tends to the plane intersection as c → 0 (the vertex side of the surface),
-    in the cancellation-free form ``t = C / (B + sign(B) sqrt(B² − aC))``.
+    The ray is first carried to the vertex plane z = 0 (as in Spencer & Murty's procedure), then the
+    root that tends to the plane intersection as c → 0 (the vertex side of the surface) is taken, in
+    the cancellation-free form ``t = C / (B + sign(B) sqrt(B² − aC))``. Without the transfer, the
+    sign of B depends on where the ray starts: from more than |R| before the vertex (a ball lens, a
+    thick plano-convex lens) it picks the far root and the ray is wrongly reported as missed.
 
     Args:
         pos: (*, 3) ray positions relative to the surface vertex, mm.
@@ -41,7 +44,10 @@ def intersect_quadric(pos: Tensor, dir: Tensor, c: Tensor, k: Tensor) -> tuple[T
         hit: (*) bool, False where the ray misses or meets the other branch of the conic.
     """
     rho = 1.0 + k
-    px, py, pz = pos.unbind(-1)
+    # Transfer to the vertex plane (skipped for rays parallel to it, which keep their start point).
+    t0 = _safe_div(-pos[..., 2], dir[..., 2])
+    px, py, pz = (pos + t0.unsqueeze(-1) * dir).unbind(-1)
+    pz = torch.where(t0 == 0, pz, torch.zeros_like(pz))  # exactly on the plane after a transfer
     dx, dy, dz = dir.unbind(-1)
     a = c * (dx * dx + dy * dy + rho * dz * dz)
     b = dz - c * (px * dx + py * dy + rho * pz * dz)
@@ -56,16 +62,14 @@ def intersect_quadric(pos: Tensor, dir: Tensor, c: Tensor, k: Tensor) -> tuple[T
     # The sag formula's branch satisfies (1 + κ) c z ≤ 1; the far side of a sphere/ellipsoid and the
     # second sheet of a hyperboloid do not.
     on_sheet = rho * c * (pz + t * dz) <= 1.0
-    # The other root, q / a. C / q is the root continuous with the plane as c → 0, but when the ray
-    # starts beyond the centre of curvature (b < 0 with the ray going forward, e.g. rays launched
-    # on an entrance pupil that lies behind surface 1's centre) C / q is the far side of the sphere
-    # and the sag-branch crossing is q / a.
+    # The other root, q / a: still needed after the transfer when the ray crosses the vertex plane
+    # beyond the centre of curvature (b < 0 going forward); then C / q is the far side of the
+    # sphere and the sag-branch crossing is q / a.
     t_other = _safe_div(q, a)
     other_ok = (a.abs() > torch.finfo(a.dtype).eps) & (rho * c * (pz + t_other * dz) <= 1.0)
-    use_other = hit & ~on_sheet & other_ok
-    t = torch.where(use_other, t_other, t)
+    t = torch.where(hit & ~on_sheet & other_ok, t_other, t)
     hit = hit & (on_sheet | other_ok)
-    return torch.where(hit, t, torch.zeros_like(t)), hit
+    return torch.where(hit, t0 + t, torch.zeros_like(t)), hit
 
 
 def intersect_asphere(
@@ -91,8 +95,8 @@ def intersect_asphere(
         iterations: fixed number of Newton iterations.
 
     Returns:
-        t: (*) distance to the intersection, mm.
-        defined: (*) bool, False where the sag is undefined at the solution (ray misses).
+        t: (*) distance to the intersection, mm (0 where Newton did not converge).
+        defined: (*) bool, False where the sag is undefined at the last iterate (ray misses).
         converged: (*) bool, False where Newton did not reach the tolerance.
     """
     p0, d0 = pos.detach(), dir.detach()
@@ -103,16 +107,20 @@ def intersect_asphere(
     t = torch.where(hit, t_conic, t_plane)
     for _ in range(iterations):
         f, fp, _ = _residual(p0, d0, t, c0, k0, a0)
-        t = t - _safe_div(f, fp)
-    # Differentiable final step from the converged point.
-    t = t.detach()
-    f, fp, defined = _residual(pos, dir, t, c, k, asphere)
-    step = _safe_div(f, fp)
-    t_final = t - step
-    scale = 1.0 + pos.detach()[..., :2].abs().amax(-1) + t.abs()
+        t_next = t - _safe_div(f, fp)
+        # A step that overflows (iterates running away on a pathological sag, float32) is not taken.
+        t = torch.where(torch.isfinite(t_next), t_next, t)
+    f, _, defined = _residual(p0, d0, t, c0, k0, a0)
+    scale = 1.0 + p0[..., :2].abs().amax(-1) + t.abs()
     tol = 64.0 * torch.finfo(t.dtype).eps * scale
-    converged = (f.detach().abs() <= tol) & torch.isfinite(t)
-    return torch.where(converged, t_final, t), defined, converged
+    converged = f.abs() <= tol  # False where f is not finite
+    # Differentiable final step from the converged point. Rows that did not converge take it from
+    # t = 0 (the ray's own, finite start) and return 0: no far-away iterate feeds inf or NaN into
+    # values or gradients (0 · inf in a masked backward pass is NaN).
+    t = torch.where(converged, t, torch.zeros_like(t))
+    f, fp, _ = _residual(pos, dir, t, c, k, asphere)
+    t_final = t - _safe_div(f, fp)
+    return torch.where(converged, t_final, torch.zeros_like(t_final)), defined, converged
 
 
 def _residual(pos: Tensor, dir: Tensor, t: Tensor, c: Tensor, k: Tensor, asphere: Tensor):

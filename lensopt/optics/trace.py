@@ -33,6 +33,9 @@ class Status(IntEnum):
     CLIPPED = 4  # outside a clipping clear aperture
 
 
+_OK = int(Status.OK)
+"""Plain-int OK code: ``tensor == IntEnum`` breaks the ``torch.compile`` graph, ``tensor == int`` does not."""
+
 REASONS = {
     Status.MISSED: "missed surface",
     Status.TIR: "total internal reflection",
@@ -103,7 +106,7 @@ class RayTrace:
     @property
     def valid(self) -> Tensor:
         """(*B) bool: rays that reached the end."""
-        return self.status == Status.OK
+        return self.status == _OK
 
 
 def trace(
@@ -151,7 +154,7 @@ def trace(
             missed, newton_failed = ~hit, torch.zeros_like(hit)
         point = local + t.unsqueeze(-1) * dir
         if s > 0:
-            backtrack = backtrack | ((t < 0) & (status == Status.OK))
+            backtrack = backtrack | ((t < 0) & (status == _OK))
         status = _fail(status, missed, Status.MISSED)
         status = _fail(status, newton_failed, Status.NEWTON)
         u = point[..., 0] ** 2 + point[..., 1] ** 2
@@ -160,7 +163,7 @@ def trace(
         hit_pos = point + origin
         failed_at = _first_failure(failed_at, status, s)
         if upto is not None and s == upto:
-            ok = (status == Status.OK).unsqueeze(-1)
+            ok = (status == _OK).unsqueeze(-1)
             pos = torch.where(ok, hit_pos, pos)
             break
         asph = lens.asphere[s] if shape.kind == "asphere" else None
@@ -178,7 +181,7 @@ def trace(
         failed_at = _first_failure(failed_at, status, s)
         if record:
             hits.append(SurfaceHit(hit_pos, dir, dir_out, normal, t, cos2_in, cos2_out))
-        ok = (status == Status.OK).unsqueeze(-1)
+        ok = (status == _OK).unsqueeze(-1)
         pos = torch.where(ok, hit_pos, pos)
         dir = torch.where(ok, dir_out, forward)
     else:
@@ -188,20 +191,20 @@ def trace(
         t = (vertex[-1] - pos[..., 2]) / safe_dz
         status = _fail(status, dz.abs() <= torch.finfo(dz.dtype).eps, Status.MISSED)
         failed_at = _first_failure(failed_at, status, lens.num_surfaces)
-        backtrack = backtrack | ((t < 0) & (status == Status.OK))
-        ok = (status == Status.OK).unsqueeze(-1)
+        backtrack = backtrack | ((t < 0) & (status == _OK))
+        ok = (status == _OK).unsqueeze(-1)
         pos = torch.where(ok, pos + t.unsqueeze(-1) * dir, pos)
     return RayTrace(pos=pos, dir=dir, status=status, backtrack=backtrack, hits=tuple(hits), failed_at=failed_at)
 
 
 def _first_failure(failed_at: Tensor, status: Tensor, surface: int) -> Tensor:
     """Record ``surface`` for rays that have failed by now and had no failure surface yet."""
-    return torch.where((status != Status.OK) & (failed_at < 0), torch.full_like(failed_at, surface), failed_at)
+    return torch.where((status != _OK) & (failed_at < 0), torch.full_like(failed_at, surface), failed_at)
 
 
 def _fail(status: Tensor, failed: Tensor, reason: Status) -> Tensor:
     """Record ``reason`` for rays that fail now and had not failed before."""
-    return torch.where((status == Status.OK) & failed, torch.full_like(status, int(reason)), status)
+    return torch.where((status == _OK) & failed, torch.full_like(status, int(reason)), status)
 
 
 def failure_counts(result: RayTrace) -> dict[str, int]:

@@ -6,15 +6,18 @@ Validation errors become one ``SpecError`` whose message names the field,
 
 from __future__ import annotations
 
+import difflib
 import json
 import tomllib
+import typing
 from pathlib import Path
 from typing import Any
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from lensopt.errors import SpecError
 from lensopt.io.files import write_text_atomic
+from lensopt.spec import models
 from lensopt.spec.models import LensSpec
 
 __all__ = ["load_spec", "parse_spec", "dump_json", "save_json", "format_loc"]
@@ -23,17 +26,21 @@ __all__ = ["load_spec", "parse_spec", "dump_json", "save_json", "format_loc"]
 def load_spec(path: str | Path) -> LensSpec:
     """Read a ``.toml`` spec or a ``.json`` lens; raise ``SpecError`` naming the bad field."""
     path = Path(path)
+    if path.is_dir():
+        raise SpecError("is a directory; expected a .toml spec or a .json lens file", path=str(path))
     if not path.is_file():
         raise SpecError("no such file", path=str(path))
-    text = path.read_text(encoding="utf-8")
     suffix = path.suffix.lower()
+    if suffix not in (".toml", ".json"):
+        raise SpecError("expected a .toml spec or a .json lens", path=str(path), got=path.suffix)
     try:
-        if suffix == ".toml":
-            data = tomllib.loads(text)
-        elif suffix == ".json":
-            data = json.loads(text)
-        else:
-            raise SpecError("expected a .toml spec or a .json lens", path=str(path), got=path.suffix)
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise SpecError(f"not a UTF-8 text file ({err.reason} at byte {err.start})", path=str(path)) from None
+    except OSError as err:
+        raise SpecError(f"cannot read the file: {err.strerror}", path=str(path)) from None
+    try:
+        data = tomllib.loads(text) if suffix == ".toml" else json.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise SpecError(f"malformed TOML: {err}", path=str(path)) from None
     except json.JSONDecodeError as err:
@@ -43,6 +50,9 @@ def load_spec(path: str | Path) -> LensSpec:
 
 def parse_spec(data: dict[str, Any]) -> LensSpec:
     """Validate a spec given as plain data (the parsed TOML/JSON)."""
+    if not isinstance(data, dict):
+        raise SpecError("a spec must be a table of sections (system, spectrum, surfaces, ...)", path="spec",
+                        got=type(data).__name__)
     try:
         return LensSpec.model_validate(data)
     except ValidationError as err:
@@ -65,7 +75,7 @@ def format_loc(loc: tuple[Any, ...]) -> str:
     for part in loc:
         if isinstance(part, int):
             out += f"[{part}]"
-        elif part in _UNION_TAGS or str(part).startswith(("function-", "union[", "literal[")):
+        elif _is_tag(part):
             continue
         else:
             out += f".{part}" if out else str(part)
@@ -75,40 +85,95 @@ def format_loc(loc: tuple[Any, ...]) -> str:
 _UNION_TAGS = {"plane", "sphere", "conic", "asphere", "diffractive", "str", "ModelGlassSpec", "TabulatedGlassSpec",
                "ObjectSpec"}
 
+#: What a value of a union field may be, for values that fit none of the alternatives.
+_UNION_HINTS = {
+    "material": 'must be "air", a catalog glass name such as "N-BK7", or a model glass { nd = 1.5168, vd = 64.17 }',
+    "object": 'must be "infinity" or { distance = <mm from the object to surface 1> }',
+}
+#: Error types of a union alternative that does not fit the value's type at all.
+_MISMATCH = {"string_type", "model_type", "dict_type", "model_attributes_type", "literal_error"}
+
+
+def _is_tag(part: Any) -> bool:
+    text = str(part)
+    return part in _UNION_TAGS or text.startswith(("function-", "union[", "literal["))
+
+
+def _kinds(union: Any) -> str:
+    """``plane, sphere, …``: the ``type`` tags of a discriminated union of models."""
+    members = typing.get_args(typing.get_args(union)[0])
+    return ", ".join(typing.get_args(m.model_fields["type"].annotation)[0] for m in members)
+
+
+def _field_names() -> list[str]:
+    names: set[str] = set()
+    for obj in vars(models).values():
+        if isinstance(obj, type) and issubclass(obj, BaseModel):
+            names.update(obj.model_fields)
+    return sorted(names)
+
+
+def _is_mismatch(e: dict[str, Any]) -> bool:
+    """An alternative of a union that the value does not fit at all (the str branch of a dict ...)."""
+    return e["type"] in _MISMATCH and bool(e["loc"]) and _is_tag(e["loc"][-1])
+
+
+def _drop_other_alternative(real: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """A material table is tried as a model glass, then as a tabulated glass: when one alternative has a
+    real complaint, the other alternative's missing or unknown fields are noise, not further errors."""
+    def in_union(e: dict[str, Any]) -> bool:
+        return any("ModelGlassSpec" in str(p) or "TabulatedGlassSpec" in str(p) for p in e["loc"])
+
+    if any(in_union(e) and e["type"] not in ("missing", "extra_forbidden") for e in real):
+        return [e for e in real if not (in_union(e) and e["type"] in ("missing", "extra_forbidden"))]
+    return real
+
 
 def _to_spec_error(err: ValidationError) -> SpecError:
     errors = err.errors(include_url=False)
-    first = _most_specific(errors)
+    real = _drop_other_alternative([e for e in errors if not _is_mismatch(e)])
+    first = real[0] if real else errors[0]
     loc = format_loc(tuple(first["loc"]))
+    # Problems other than the first: real errors, plus unions that no alternative fits (their
+    # mismatches are noise when another alternative of the same union reports a real error).
+    real_locs = [format_loc(tuple(e["loc"])) for e in real]
+    unfit = {format_loc(tuple(e["loc"])) for e in errors if _is_mismatch(e)}
+    unfit = {u for u in unfit if not any(r == u or r.startswith((u + ".", u + "[")) for r in real_locs)}
+    extra = len(real) + len(unfit) - 1
+
+    kind = first["type"]
     msg = str(first["msg"])
+    got = first.get("input", ...)
     for prefix in ("Value error, ", "Assertion failed, "):
         if msg.startswith(prefix):
             msg = msg[len(prefix):]
     if msg.startswith("@"):  # validators may name a sub-field: "@thickness: ..."
         sub, _, msg = msg[1:].partition(": ")
         loc = f"{loc}{'' if sub.startswith('[') else '.'}{sub}" if loc else sub
-    got = first.get("input", ...)
-    if first["type"] in ("missing", "model_type", "dict_type") or isinstance(got, dict | list) or "(got" in msg:
+    if _is_mismatch(first):
+        name = loc.rsplit(".", 1)[-1]
+        msg = _UNION_HINTS.get(name, msg)
+    elif kind == "union_tag_invalid":
+        what = _kinds(models.BaseShape) if loc.endswith("base") else _kinds(models.SurfaceSpec)
+        loc, msg, got = f"{loc}.type", f"unknown type; expected one of {what}", first["ctx"]["tag"]
+    elif kind == "union_tag_not_found":
+        what = _kinds(models.BaseShape) if loc.endswith("base") else _kinds(models.SurfaceSpec)
+        loc, msg, got = f"{loc}.type", f"required field is missing; one of {what}", ...
+    elif kind in ("model_type", "dict_type", "model_attributes_type"):
+        msg = "must be a table of fields ({ key = value, ... } in TOML, an object in JSON)"
+    elif kind == "missing":
+        msg, got = "required field is missing", ...
+    elif kind == "too_short":
+        n = first["ctx"]["min_length"]
+        msg, got = f"needs at least {n} entr{'y' if n == 1 else 'ies'}", ...
+    elif kind == "extra_forbidden":
+        close = difflib.get_close_matches(loc.rsplit(".", 1)[-1], _field_names(), n=1)
+        msg = "unknown field" + (f"; did you mean {close[0]!r}?" if close else "")
+    if first["loc"] and first["loc"][-1] == "[key]":  # a dict key that is not a power
+        loc = format_loc(tuple(first["loc"][:-2]))
+        msg, got = "keys must be even integer powers, e.g. 4, 6, 8", first["loc"][-2]
+    if isinstance(got, dict | list) or "(got" in msg:
         got = ...
-    extra = len(errors) - 1
-    if extra and first["type"] != "union_tag_invalid":
+    if extra > 0:
         msg += f" [+{extra} more]"
-    if first["type"] == "extra_forbidden":
-        msg = "unknown field"
-    if first["type"] == "missing":
-        msg = "required field is missing"
     return SpecError(msg, path=loc or "spec", got=got)
-
-
-def _most_specific(errors: list[dict[str, Any]]) -> dict[str, Any]:
-    """Prefer errors that are not the catch-all alternatives of a union (``material`` as str/dict)."""
-    candidates = [e for e in errors if not any(str(p) in ("str", "literal['infinity']") for p in e["loc"])]
-    if not candidates:
-        return errors[0]
-    # A material dict is tried as a model glass, then as a tabulated glass: report the alternative
-    # with a real complaint rather than the other one's missing/unknown fields.
-    if any("TabulatedGlassSpec" in str(p) for e in candidates for p in e["loc"]):
-        real = [e for e in candidates if e["type"] not in ("missing", "extra_forbidden")]
-        if real:
-            return real[0]
-    return candidates[0]

@@ -43,7 +43,9 @@ __all__ = [
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True, ser_json_inf_nan="constants")
+    # Numbers must be finite (TOML accepts inf and nan); only a radius may be inf (a flat surface).
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, ser_json_inf_nan="constants",
+                              allow_inf_nan=False)
 
 
 # --------------------------------------------------------------------------------------- system
@@ -74,9 +76,9 @@ class FieldSpec(_Model):
     @field_validator("relative")
     @classmethod
     def _relative_range(cls, v: list[float]) -> list[float]:
-        for x in v:
+        for i, x in enumerate(v):
             if not 0.0 <= x <= 1.0:
-                raise ValueError(f"relative fields must lie in [0, 1] (got {x})")
+                raise ValueError(f"@[{i}]: a relative field must lie in [0, 1] (got {x})")
         return v
 
     @model_validator(mode="after")
@@ -85,9 +87,10 @@ class FieldSpec(_Model):
             raise ValueError("give exactly one of hfov_deg or image_height")
         if self.weights is not None:
             if len(self.weights) != len(self.relative):
-                raise ValueError(f"weights needs one entry per relative field ({len(self.relative)})")
+                raise ValueError(f"@weights: needs one entry per relative field ({len(self.relative)} fields, "
+                                 f"got {len(self.weights)} weights)")
             if any(w < 0 for w in self.weights) or sum(self.weights) <= 0:
-                raise ValueError("weights must be non-negative with a positive sum")
+                raise ValueError(f"@weights: must be non-negative with a positive sum (got {self.weights})")
         return self
 
 
@@ -143,11 +146,11 @@ class SpectrumSpec(_Model):
     @field_validator("wavelengths_nm")
     @classmethod
     def _positive(cls, v: list[float]) -> list[float]:
-        for x in v:
+        for i, x in enumerate(v):
             if not (x > 0 and math.isfinite(x)):
-                raise ValueError(f"wavelengths must be positive (got {x})")
+                raise ValueError(f"@[{i}]: a wavelength must be positive, in nm (got {x})")
         if len(set(v)) != len(v):
-            raise ValueError("wavelengths must be distinct")
+            raise ValueError(f"wavelengths must be distinct (got {v})")
         return v
 
     @model_validator(mode="after")
@@ -155,18 +158,20 @@ class SpectrumSpec(_Model):
         n = len(self.wavelengths_nm)
         if self.weights is not None:
             if len(self.weights) != n:
-                raise ValueError(f"weights needs one entry per wavelength ({n}, got {len(self.weights)})")
+                raise ValueError(f"@weights: needs one entry per wavelength ({n} wavelengths, "
+                                 f"got {len(self.weights)} weights)")
             if any(w < 0 for w in self.weights) or sum(self.weights) <= 0:
-                raise ValueError("weights must be non-negative with a positive sum")
+                raise ValueError(f"@weights: must be non-negative with a positive sum (got {self.weights})")
         if self.reference_nm is not None and self.reference_nm not in self.wavelengths_nm:
-            raise ValueError(f"reference_nm must be one of wavelengths_nm (got {self.reference_nm})")
+            raise ValueError(f"@reference_nm: must be one of wavelengths_nm {self.wavelengths_nm} "
+                             f"(got {self.reference_nm})")
         if self.rgb_weights is not None:
             if len(self.rgb_weights) != n or any(len(row) != 3 for row in self.rgb_weights):
-                raise ValueError(f"rgb_weights must be {n} rows of 3 (R, G, B) weights")
+                raise ValueError(f"@rgb_weights: must be {n} rows (one per wavelength) of 3 (R, G, B) weights")
             for col, name in enumerate("RGB"):
                 total = sum(row[col] for row in self.rgb_weights)
                 if abs(total - 1.0) > 1e-3:
-                    raise ValueError(f"rgb_weights column {name} must sum to 1 (got {total:.4f})")
+                    raise ValueError(f"@rgb_weights: column {name} must sum to 1 (got {total:.4f})")
         return self
 
     @property
@@ -233,7 +238,9 @@ _RADIUS_DOC = "radius of curvature in mm (non-zero; inf for a flat base)"
 
 
 def _check_radius(v: float) -> float:
-    if v == 0 or math.isnan(v):
+    if math.isnan(v):
+        raise ValueError("must be a number in mm (inf or type = \"plane\" for a flat surface)")
+    if v == 0:
         raise ValueError("must be non-zero (use inf or type = \"plane\" for a flat surface)")
     return v
 
@@ -250,7 +257,7 @@ class PlaneShape(_Model):
 
 
 class _Curved(_Model):
-    radius: float = Field(description=_RADIUS_DOC)
+    radius: float = Field(description=_RADIUS_DOC, allow_inf_nan=True)
 
     @field_validator("radius")
     @classmethod

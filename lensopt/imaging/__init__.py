@@ -1,0 +1,1 @@
+"""Image simulation (S1.5): scene plans, PSF grids, spatially varying convolution, effects, image I/O."""

@@ -1,0 +1,122 @@
+"""What ``lensopt simulate`` and ``lensopt plot psf`` do, as library calls returning plain data
+(the CLI only parses options and renders)."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from lensopt.analysis.psf import KERNELS
+from lensopt.analysis.psf_stack import PsfSettings, compute_psfs
+from lensopt.analysis.spot import spot_stats
+from lensopt.errors import LensoptError
+from lensopt.imaging.io import linear_to_srgb, read_image, write_image
+from lensopt.imaging.metrics import psnr, ssim
+from lensopt.imaging.plan import PlanOptions, channel_weights, parse_effects
+from lensopt.imaging.simulate import plan_scene, run_plan
+from lensopt.optics.sampling import PupilSampling
+from lensopt.spec.build import Model
+
+__all__ = ["parse_grid", "run_simulate", "plot_psfs"]
+
+
+def parse_grid(text: str | None) -> tuple[int, int] | None:
+    """``5x4`` → (5, 4) (columns × rows)."""
+    if text is None:
+        return None
+    m = re.fullmatch(r"\s*(\d+)\s*[x×]\s*(\d+)\s*", text)
+    if not m or int(m.group(1)) < 1 or int(m.group(2)) < 1:
+        raise LensoptError("expected WxH with positive integers, e.g. 5x4", path="--grid", got=text)
+    return int(m.group(1)), int(m.group(2))
+
+
+def run_simulate(
+    model: Model,
+    image_path: Path,
+    output: Path | None,
+    *,
+    region: str | None = None,
+    effects: str | None = None,
+    reference: Path | None = None,
+    plan_only: bool = False,
+    sampling: str = "rings:32",
+    kernel: str = "triangular",
+    grid: tuple[int, int] | None = None,
+    overlap: float = 0.25,
+    seed: int = 0,
+    on_plan: Callable[[dict[str, Any]], None] | None = None,
+) -> dict[str, Any]:
+    """Plan, report the plan through ``on_plan`` (before running), simulate, write, score.
+
+    Returns the plan (``plan_only``) or {plan, timings, output, encodings, metrics}.
+    """
+    if kernel not in KERNELS:
+        raise LensoptError(f"must be one of {', '.join(KERNELS)}", path="--kernel", got=kernel)
+    PupilSampling.parse(sampling, path="--rays")
+    img, info = read_image(image_path, option="IMAGE")
+    opts = PlanOptions(sampling=sampling, kernel=kernel, grid=grid, overlap=overlap, seed=seed)
+    image_info = {"width": info.width, "height": info.height, "channels": info.channels, "bits": info.bits,
+                  "encoding": info.encoding, "format": info.format, "path": str(image_path)}
+    timings: dict[str, float] = {}
+    plan, pilot, reg, sensor = plan_scene(model, image_info, region=region, effects=parse_effects(effects),
+                                          options=opts, timings=timings)
+    plan_json = plan.as_json()
+    if on_plan is not None:
+        on_plan(plan_json)
+    if plan_only:
+        return plan_json
+    assert output is not None  # checked by the caller
+    with torch.inference_mode():
+        res = run_plan(model, plan, pilot, reg, sensor, img, opts, timings)
+    encoding = write_image(output, res.image, info)
+    metrics = None
+    if reference is not None:
+        ref, ref_info = read_image(reference, option="--reference")
+        if ref.shape != res.image.shape:
+            raise LensoptError(f"must have the simulated image's shape {res.image.shape}", path="--reference",
+                               got=ref.shape)
+        against = str(reference)
+    else:
+        ref, against = img, "the input scene"
+    metrics = {"against": against, "psnr_db": psnr(linear_to_srgb(ref), linear_to_srgb(res.image)),
+               "ssim": ssim(linear_to_srgb(ref), linear_to_srgb(res.image)), "space": "sRGB-encoded [0, 1]"}
+    return {"plan": plan_json, "timings": timings, "output": str(output), "output_encoding": encoding,
+            "input_encoding": f"{info.encoding} {info.bits}-bit {'float' if info.is_float else 'integer'}"
+                              + (" (linearized)" if info.encoding == "sRGB" else ""),
+            "metrics": metrics}
+
+
+def plot_psfs(model: Model, output: Path, *, sampling: str = "rings:32", kernel: str = "triangular",
+              diffraction: str = "heuristic", pitch_um: float | None = None, sqrt: bool = False,
+              seed: int = 0) -> None:
+    """RGB PSFs at the spec's fields, bins of ``pitch_um`` (default: the sensor pitch, else 1 µm)."""
+    from lensopt.plot.psf import save_psf_figure
+
+    spec = model.spec
+    if pitch_um is None:
+        pitch_um = spec.sensor.pixel_pitch_um if spec.sensor is not None else 1.0
+    if not pitch_um > 0:
+        raise LensoptError("must be positive", path="--pitch-um", got=pitch_um)
+    settings = PsfSettings(sampling=sampling, kernel=kernel, diffraction=diffraction, pitch_mm=pitch_um * 1e-3,
+                           seed=seed, max_size=161)
+    lens, system = model.lens, model.system
+    rel = torch.tensor(system.rel_field, dtype=lens.dtype)
+    with torch.no_grad():
+        stack = compute_psfs(lens, system, rel, settings)
+    wl = list(spec.spectrum.wavelengths_nm)
+    if spec.spectrum.rgb_weights is not None or len(wl) == 3:
+        ww, _, _ = channel_weights(spec.spectrum, 3, wl)
+    else:  # no colour mapping: show the spectrum-weighted sum in gray
+        ww = np.repeat(channel_weights(spec.spectrum, 1, wl)[0], 3, axis=1)
+    from lensopt.optics.bundle import trace_bundle
+
+    ps = PupilSampling.parse(sampling, seed=seed, path="--rays")
+    with torch.no_grad():
+        b = trace_bundle(lens, system, ps.points(dtype=lens.dtype), half_pupil=ps.half, rel_field=rel)
+        rms = (spot_stats(b, system.wavelength_weights).rms_radius * 1e3).tolist()
+    save_psf_figure(output, stack, ww, title=spec.name, sqrt=sqrt, rms_um=rms)

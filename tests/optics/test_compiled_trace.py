@@ -1,0 +1,99 @@
+"""``compiled_trace`` (torch.compile) gives the eager ``trace``'s numbers and failure statuses.
+
+Oracle: the eager ``trace`` itself (validated against optiland elsewhere); the compiled graph must
+reproduce it to rounding (Inductor may contract a*b + c into an FMA and reorder short sums), so
+float64 intercepts agree to ~1e-12 mm and every status code is identical.
+"""
+
+import dataclasses
+import logging
+
+import pytest
+import torch
+
+from lensopt.optics import compiled
+from lensopt.optics.compiled import clear_compiled_cache, compiled_trace
+from lensopt.optics.trace import REASONS, Rays, Status, trace
+from lensopt.spec import build, parse_spec
+
+# One lens that exercises every code path of the trace in a single compile: Newton on an even
+# asphere, closed-form sphere and hyperboloid (κ < −1), a clipping clear aperture, a diffractive
+# surface, TIR at the glass–air exits, rays that miss, and rays where Newton does not converge.
+MIXED = {
+    "name": "mixed",
+    "system": {"aperture": {"epd": 12.0}, "field": {"hfov_deg": 10.0, "relative": [0.0, 1.0]}, "object": "infinity"},
+    "spectrum": {"wavelengths_nm": [486.1, 587.6, 656.3], "reference_nm": 587.6},
+    "surfaces": [
+        {"type": "asphere", "radius": 15.0, "conic": -0.5, "coefficients": {4: -4e-4, 6: 2e-6}, "thickness": 4.0,
+         "material": "N-BK7"},
+        {"type": "sphere", "radius": -40.0, "thickness": 2.0, "stop": True},
+        {"type": "conic", "radius": -20.0, "conic": -2.5, "thickness": 2.0, "material": "N-SF5",
+         "semi_diameter": 8.0, "clip": True},
+        {"type": "diffractive", "base": {"type": "plane"}, "phase": {2: -30.0, 4: 0.05},
+         "design_wavelength_nm": 587.6, "thickness": 30.0},
+    ],
+}
+
+
+def _rays(n: int = 400) -> Rays:
+    """Rays from z = −2 mm over a ±9 mm square at 0–60° in the meridional plane, random wavelengths."""
+    g = torch.Generator().manual_seed(1)
+    xy = (torch.rand(n, 2, generator=g, dtype=torch.float64) * 2 - 1) * 9.0
+    ang = torch.deg2rad(torch.rand(n, generator=g, dtype=torch.float64) * 60.0)
+    d = torch.stack([torch.zeros_like(ang), torch.sin(ang), torch.cos(ang)], -1)
+    pos = torch.cat([xy, torch.full((n, 1), -2.0, dtype=torch.float64)], -1)
+    return Rays(pos=pos, dir=d, wavelength=torch.randint(0, 3, (n,), generator=g))
+
+
+@pytest.fixture(autouse=True)
+def _fresh_cache():
+    clear_compiled_cache()
+    yield
+    clear_compiled_cache()
+
+
+def test_compiled_equals_eager_with_every_failure_reason() -> None:
+    lens = build(parse_spec(MIXED)).lens
+    rays = _rays()
+    eager = trace(lens, rays)
+    # The case really covers every reason, and enough rays get through.
+    for reason in REASONS:
+        assert int((eager.status == reason).sum()) > 0, REASONS[reason]
+    assert int((eager.status == Status.OK).sum()) > 150
+    assert bool(eager.backtrack.any())
+
+    # fallback=False: a compilation failure or graph break (fullgraph) fails this test.
+    comp = compiled_trace(lens, rays, fallback=False)
+    assert torch.equal(comp.status, eager.status)
+    assert torch.equal(comp.backtrack, eager.backtrack)
+    assert comp.pos.dtype == torch.float64
+    assert torch.isfinite(comp.pos).all() and torch.isfinite(comp.dir).all()
+    assert (comp.pos - eager.pos).abs().max() <= 1e-12
+    assert (comp.dir - eager.dir).abs().max() <= 1e-12
+
+    # New tensor values, same structure: the cached function serves them with the new numbers.
+    moved = dataclasses.replace(lens, thickness=lens.thickness + 0.1)
+    eager2, comp2 = trace(moved, rays), compiled_trace(moved, rays, fallback=False)
+    assert not torch.allclose(eager2.pos, eager.pos)
+    assert torch.equal(comp2.status, eager2.status)
+    assert (comp2.pos - eager2.pos).abs().max() <= 1e-12
+    assert len(compiled._cache) == 1
+
+
+def test_falls_back_to_eager_when_compilation_fails(monkeypatch, caplog) -> None:
+    def broken_compile(fn, **kwargs):
+        def run(*args):
+            raise RuntimeError("no C++ compiler")
+        return run
+
+    monkeypatch.setattr(compiled.torch, "compile", broken_compile)
+    lens = build(parse_spec(MIXED)).lens
+    rays = _rays(50)
+    with caplog.at_level(logging.WARNING, logger="lensopt.optics.compiled"):
+        out = compiled_trace(lens, rays)
+    eager = trace(lens, rays)
+    assert torch.equal(out.pos, eager.pos) and torch.equal(out.status, eager.status)
+    assert "no C++ compiler" in caplog.text
+    with pytest.raises(RuntimeError, match="no C\\+\\+ compiler"):
+        clear_compiled_cache()
+        compiled_trace(lens, rays, fallback=False)
