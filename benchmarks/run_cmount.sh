@@ -7,7 +7,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 mkdir -p out
 THREADS="${OMP_NUM_THREADS:-1}"
-NICE="${NICE:-0}"
+NICE="${NICE:-3}"
 echo "load before: $(cat /proc/loadavg)" | tee out/cmount_4p_run.txt
 start=$(date +%s.%N)
 OMP_NUM_THREADS="$THREADS" nice -n "$NICE" .venv/bin/lensopt optimize specs/cmount_4p.toml \

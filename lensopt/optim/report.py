@@ -19,8 +19,11 @@ from lensopt.optim.residuals import BIG, gap_lengths
 
 __all__ = ["constraint_report", "TOLERANCE"]
 
-TOLERANCE = {"mm": 1e-3, "deg": 1e-2, "percent": 1e-3, "fraction": 1e-4}
-"""How far past its threshold a soft constraint may end and still count as met."""
+TOLERANCE = {"mm": 5e-3, "deg": 1e-2, "percent": 2e-2, "fraction": 1e-3}
+"""How far past its threshold a soft constraint may end and still count as met: soft constraints end a
+hair past their thresholds, and the summary measures them on a denser sample than the optimizer used
+(a centroid moves by ~0.01 % of the image height between rings:6 and rings:48). A spec that must meet
+a requirement strictly asks for it with these margins."""
 
 
 def _deg(cos2: torch.Tensor) -> float:
