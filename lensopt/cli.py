@@ -373,6 +373,45 @@ def import_codev(
     save_json(result.spec, output)
     err_console.print(f"wrote {output}", highlight=False)
 
+# -------------------------------------------------------------------------------------- optimize
+
+
+@app.command()
+@handle_errors
+def optimize(
+    spec: Annotated[Path, typer.Argument(help="Lens spec (.toml or .json) with vary lists and [optimize].")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Where to write the optimized lens (.json).")],
+    optimizer: Annotated[str | None, typer.Option("--optimizer", help="lm | adam (default: the spec's).")] = None,
+    steps: Annotated[int | None, typer.Option("--steps", min=1, help="Steps (default: the spec's).")] = None,
+    seed: SeedOpt = 0,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live display.")] = False,
+    as_json: JsonOpt = False,
+) -> None:
+    """Levenberg–Marquardt (or Adam) for spot size with solves and constraints; Ctrl-C keeps the best lens."""
+    from lensopt.analysis.report import trace_report
+    from lensopt.cli_optimize import LiveProgress, render_summary, summary
+    from lensopt.optim import Problem
+    from lensopt.optim import optimize as run_optimize
+    from lensopt.optim.report import constraint_report
+    from lensopt.spec import save_json
+
+    if output.suffix.lower() != ".json":
+        raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
+    start_spec = load_spec(spec)
+    with LiveProgress(err_console, enabled=not quiet) as live:
+        result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live)
+    save_json(result.spec, output)  # atomic
+    sampling = PupilSampling.parse("rings:24", seed=seed)
+    final_problem = Problem(result.spec, seed=seed)
+    s = summary(result, trace_report(build(start_spec), sampling), trace_report(build(result.spec), sampling),
+                constraint_report(final_problem, final_problem.theta0, sampling), str(output))
+    if as_json:
+        print_json(s)
+    else:
+        render_summary(console, s)
+    if result.interrupted:
+        raise typer.Exit(130)
+
 
 # -------------------------------------------------------------------------------------- simulate
 

@@ -94,6 +94,8 @@ class RayTrace:
         status: (*B) int64 first failure reason (see ``Status``).
         backtrack: (*B) bool, True where some ray-marching distance was negative.
         hits: per-surface records when traced with ``record=True``, else empty.
+        failed_at: (*B) int64 index of the surface where the ray failed (S = the image surface),
+            −1 for rays that reached the end; None when not recorded.
     """
 
     pos: Tensor
@@ -101,6 +103,7 @@ class RayTrace:
     status: Tensor
     backtrack: Tensor
     hits: tuple[SurfaceHit, ...] = ()
+    failed_at: Tensor | None = None
 
     @property
     def valid(self) -> Tensor:
@@ -132,6 +135,7 @@ def trace(
     pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
     batch = pos.shape[:-1]
     status = torch.zeros(batch, dtype=torch.int64, device=pos.device)
+    failed_at = torch.full(batch, -1, dtype=torch.int64, device=pos.device)
     backtrack = torch.zeros(batch, dtype=torch.bool, device=pos.device)
     vertex = lens.vertex_z()
     lam_mm = lens.wavelength_um[rays.wavelength] * 1e-3
@@ -159,6 +163,7 @@ def trace(
         if shape.clip:
             status = _fail(status, u > lens.semi_diameter[s] ** 2, Status.CLIPPED)
         hit_pos = point + origin
+        failed_at = _first_failure(failed_at, status, s)
         if upto is not None and s == upto:
             ok = (status == _OK).unsqueeze(-1)
             pos = torch.where(ok, hit_pos, pos)
@@ -175,6 +180,7 @@ def trace(
         n2 = lens.index[s + 1][rays.wavelength]
         dir_out, cos2_in, cos2_out, tir = bend(dir, normal, n1, n2, grating)
         status = _fail(status, tir, Status.TIR)
+        failed_at = _first_failure(failed_at, status, s)
         if record:
             hits.append(SurfaceHit(hit_pos, dir, dir_out, normal, t, cos2_in, cos2_out))
         ok = (status == _OK).unsqueeze(-1)
@@ -186,10 +192,16 @@ def trace(
         safe_dz = torch.where(dz.abs() > torch.finfo(dz.dtype).eps, dz, torch.ones_like(dz))
         t = (vertex[-1] - pos[..., 2]) / safe_dz
         status = _fail(status, dz.abs() <= torch.finfo(dz.dtype).eps, Status.MISSED)
+        failed_at = _first_failure(failed_at, status, lens.num_surfaces)
         backtrack = backtrack | ((t < 0) & (status == _OK))
         ok = (status == _OK).unsqueeze(-1)
         pos = torch.where(ok, pos + t.unsqueeze(-1) * dir, pos)
-    return RayTrace(pos=pos, dir=dir, status=status, backtrack=backtrack, hits=tuple(hits))
+    return RayTrace(pos=pos, dir=dir, status=status, backtrack=backtrack, hits=tuple(hits), failed_at=failed_at)
+
+
+def _first_failure(failed_at: Tensor, status: Tensor, surface: int) -> Tensor:
+    """Record ``surface`` for rays that have failed by now and had no failure surface yet."""
+    return torch.where((status != _OK) & (failed_at < 0), torch.full_like(failed_at, surface), failed_at)
 
 
 def _fail(status: Tensor, failed: Tensor, reason: Status) -> Tensor:

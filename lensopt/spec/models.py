@@ -13,6 +13,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from lensopt.spec.optim import OptimizeSpec
+
 __all__ = [
     "ApertureSpec",
     "FieldSpec",
@@ -417,7 +419,8 @@ class ImageSpec(_Model):
 
 
 class LensSpec(_Model):
-    """A complete lens: system, spectrum, optional sensor, surfaces in order, image."""
+    """A complete lens: system, spectrum, optional sensor, surfaces in order, image, and the optional
+    ``[optimize]`` section read by ``lensopt optimize`` (see ``lensopt.spec.optim``)."""
 
     name: str = "lens"
     system: SystemSpec
@@ -425,6 +428,7 @@ class LensSpec(_Model):
     sensor: SensorSpec | None = None
     surfaces: list[SurfaceSpec] = Field(min_length=1)
     image: ImageSpec = Field(default_factory=ImageSpec)
+    optimize: OptimizeSpec | None = None
 
     @model_validator(mode="after")
     def _structure(self) -> LensSpec:

@@ -1,0 +1,111 @@
+"""Cost of the LM Jacobian: forward mode (torch.func.jacfwd, what LM uses) against reverse mode
+(jacrev) and finite differences (forward N+1 and central 2N residual evaluations), on the optimization
+problems of specs/cooke_triplet_opt.toml and specs/cmount_4p.toml (start points).
+
+    .venv/bin/python benchmarks/jacobian_cost.py --repeats 5 --json benchmarks/results_jacobian_cost.json
+
+Prints a markdown table: median wall time per Jacobian, ratio to jacfwd, and the largest difference
+from jacfwd relative to the largest Jacobian entry. Reverse mode is skipped for problems with more than
+``--jacrev-max-rows`` residuals (it costs one backward pass per residual row).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import time
+from pathlib import Path
+
+import torch
+
+from lensopt.optim import Problem
+from lensopt.spec import load_spec
+
+SPECS = Path(__file__).resolve().parents[1] / "specs"
+
+
+def _time(fn, repeats: int) -> tuple[float, torch.Tensor]:  # noqa: ANN001
+    out = fn()  # warm-up (functorch's first call builds its rules)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), out
+
+
+def bench(spec_name: str, repeats: int, jacrev_max_rows: int) -> dict:
+    p = Problem(load_spec(SPECS / spec_name))
+    theta = p.theta0
+    N, M = p.num_variables, p.size
+    h = 1e-6
+
+    def forward_fd() -> torch.Tensor:
+        with torch.no_grad():
+            r0 = p.residuals(theta)
+            cols = []
+            for n in range(N):
+                e = torch.zeros_like(theta)
+                e[n] = h
+                cols.append((p.residuals(theta + e) - r0) / h)
+        return torch.stack(cols, 1)
+
+    def central_fd() -> torch.Tensor:
+        with torch.no_grad():
+            cols = []
+            for n in range(N):
+                e = torch.zeros_like(theta)
+                e[n] = h
+                cols.append((p.residuals(theta + e) - p.residuals(theta - e)) / (2 * h))
+        return torch.stack(cols, 1)
+
+    rows = {}
+    t_res, _ = _time(lambda: p.residuals(theta).detach(), repeats)
+    rows["one residual evaluation"] = (t_res, None)
+    t_fwd, J = _time(lambda: p.jacobian(theta)[0], repeats)
+    rows["jacfwd (forward mode)"] = (t_fwd, J)
+    if M <= jacrev_max_rows:
+        rows["jacrev (reverse mode)"] = _time(lambda: torch.func.jacrev(p.residuals)(theta), max(1, repeats // 2))
+    rows[f"forward differences (N+1 = {N + 1} evaluations)"] = _time(forward_fd, repeats)
+    rows[f"central differences (2N = {2 * N} evaluations)"] = _time(central_fd, repeats)
+    scale = float(J.abs().max())
+    out = {"spec": spec_name, "variables": N, "residuals": M, "rows": []}
+    for name, (t, Jx) in rows.items():
+        diff = None if Jx is None or Jx is J else float((Jx - J).abs().max()) / scale
+        out["rows"].append({"method": name, "median_s": t, "ratio_to_jacfwd": t / t_fwd, "max_rel_diff": diff})
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--jacrev-max-rows", type=int, default=20000)
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args()
+    results = {
+        "machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "torch": torch.__version__,
+                    "threads": torch.get_num_threads(), "loadavg_before": os.getloadavg()},
+        "problems": [bench(s, args.repeats, args.jacrev_max_rows)
+                     for s in ("cooke_triplet_opt.toml", "cmount_4p.toml")],
+    }
+    results["machine"]["loadavg_after"] = os.getloadavg()
+    for prob in results["problems"]:
+        print(f"\n{prob['spec']}: N = {prob['variables']} variables, M = {prob['residuals']} residuals\n")
+        print("| method | median s | × jacfwd | max |ΔJ| / max |J| |")
+        print("| --- | ---: | ---: | ---: |")
+        for r in prob["rows"]:
+            d = "—" if r["max_rel_diff"] is None else f"{r['max_rel_diff']:.1e}"
+            print(f"| {r['method']} | {r['median_s']:.3f} | {r['ratio_to_jacfwd']:.2f} | {d} |")
+    print(f"\nload average before/after: {results['machine']['loadavg_before']} / "
+          f"{results['machine']['loadavg_after']}, torch threads {results['machine']['threads']}")
+    if args.json:
+        from lensopt.io.files import write_text_atomic
+
+        write_text_atomic(args.json, json.dumps(results, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,112 @@
+"""LM against Adam on the same problem and wall-time budget (issue 3; seed S2.3): merit ½‖ℓ‖² against
+wall time, from the same residual function.
+
+Problem: the C-mount study's crude start (specs/cmount_4p.toml) with the glasses held at the start
+glass, so that both optimizers see one fixed merit function (no binding, no schedule); the Cooke
+triplet problem (specs/cooke_triplet_opt.toml) with ``--problem cooke``. Adam runs with several
+learning rates (the best is reported); LM with the Table S7 defaults.
+
+    .venv/bin/python benchmarks/lm_vs_adam.py --budget 180 --json benchmarks/results_lm_vs_adam.json \\
+        --plot benchmarks/lm_vs_adam.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import time
+from pathlib import Path
+
+import torch
+
+from lensopt.optim import Problem
+from lensopt.optim.run import make_optimizer
+from lensopt.spec import load_spec
+
+SPECS = Path(__file__).resolve().parents[1] / "specs"
+
+
+def problem(name: str) -> Problem:
+    if name == "cooke":
+        return Problem(load_spec(SPECS / "cooke_triplet_opt.toml"))
+    spec = load_spec(SPECS / "cmount_4p.toml")
+    for s in spec.surfaces:
+        s.vary = [v for v in s.vary if v != "material"]
+    return Problem(spec)
+
+
+def run(p: Problem, method: str, budget_s: float, lr: float | None = None) -> list[tuple[float, float]]:
+    """(wall s, best merit so far) after every step until the budget is spent."""
+    if lr is not None:
+        p.opt.adam.lr = lr
+    opt = make_optimizer(p, p.theta0, method)
+    one = torch.ones(p.size, dtype=p.dtype)
+    t0 = time.perf_counter()
+    best = opt.merit(one)
+    trace = [(0.0, best)]
+    while time.perf_counter() - t0 < budget_s:
+        info = opt.step(one)
+        if info.accepted and math.isfinite(info.merit):
+            best = min(best, info.merit)
+        trace.append((time.perf_counter() - t0, best))
+    return trace
+
+
+def at(trace: list[tuple[float, float]], t: float) -> float:
+    return min(m for s, m in trace if s <= t)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--problem", choices=["cmount", "cooke"], default="cmount")
+    ap.add_argument("--budget", type=float, default=180.0, help="wall seconds per optimizer run")
+    ap.add_argument("--lrs", type=float, nargs="+", default=[1e-4, 1e-3, 1e-2])
+    ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--plot", type=Path, default=None)
+    args = ap.parse_args()
+    load_before = os.getloadavg()
+    p = problem(args.problem)
+    runs = {"LM (Table S7)": run(p, "lm", args.budget)}
+    for lr in args.lrs:
+        runs[f"Adam lr={lr:g}"] = run(problem(args.problem), "adam", args.budget, lr)
+    start = runs["LM (Table S7)"][0][1]
+    checkpoints = [args.budget * f for f in (0.1, 0.25, 0.5, 1.0)]
+    print(f"problem {args.problem}: N = {p.num_variables}, M = {p.size}, start merit {start:.4e}, "
+          f"budget {args.budget:g} s per run, load average {load_before} → {os.getloadavg()}\n")
+    print("| optimizer | steps | " + " | ".join(f"merit at {c:g} s" for c in checkpoints) + " |")
+    print("| --- | ---: | " + " | ".join("---:" for _ in checkpoints) + " |")
+    for name, tr in runs.items():
+        print(f"| {name} | {len(tr) - 1} | " + " | ".join(f"{at(tr, c):.4e}" for c in checkpoints) + " |")
+    if args.json:
+        from lensopt.io.files import write_text_atomic
+
+        write_text_atomic(args.json, json.dumps({
+            "problem": args.problem, "variables": p.num_variables, "residuals": p.size, "budget_s": args.budget,
+            "loadavg_before": load_before, "loadavg_after": os.getloadavg(), "threads": torch.get_num_threads(),
+            "runs": {k: v for k, v in runs.items()}}, indent=1) + "\n")
+    if args.plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        from lensopt.io.files import atomic_path
+
+        fig, ax = plt.subplots(figsize=(6.4, 4.2))
+        for name, tr in runs.items():
+            ax.plot([t for t, _ in tr], [m for _, m in tr], label=name, lw=2 if name.startswith("LM") else 1)
+        ax.set_yscale("log")
+        ax.set_xlabel("wall time (s)")
+        ax.set_ylabel("best merit ½‖ℓ‖²")
+        ax.set_title(f"LM vs Adam, {args.problem} (N = {p.num_variables})")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+        fig.tight_layout()
+        with atomic_path(args.plot) as tmp:
+            fig.savefig(tmp, dpi=120)
+
+
+if __name__ == "__main__":
+    main()

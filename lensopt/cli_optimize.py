@@ -1,0 +1,119 @@
+"""Rendering for ``lensopt optimize`` (CLI layer: rich lives here, no physics): the live progress
+display and the final summary."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from rich.console import Console, Group
+from rich.live import Live
+from rich.table import Table
+from rich.text import Text
+
+from lensopt.optim.run import OptimizeResult, Progress
+
+__all__ = ["LiveProgress", "render_summary", "summary"]
+
+
+class LiveProgress:
+    """A rich Live display fed with ``Progress`` records (refreshed at most ~8 times a second)."""
+
+    def __init__(self, console: Console, *, enabled: bool = True) -> None:
+        self.console = console
+        self.enabled = enabled
+        self.live: Live | None = None
+        self.last: Progress | None = None
+        self.events: list[str] = []
+        self._shown = 0.0
+
+    def __enter__(self) -> LiveProgress:
+        if self.enabled:
+            self.live = Live(Text("starting…"), console=self.console, refresh_per_second=8, transient=False)
+            self.live.__enter__()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.live is not None:
+            if self.last is not None:
+                self.live.update(self._render(self.last))
+            self.live.__exit__(None, None, None)
+
+    def __call__(self, p: Progress) -> None:
+        self.last = p
+        if self.live is None and p.step == 1:
+            self.console.print("running… (Ctrl-C keeps the best lens so far)", highlight=False)
+        if p.event and p.event != "merit rose":
+            self.events.append(f"step {p.step}: {p.event}")
+        now = time.monotonic()
+        if self.live is not None and (now - self._shown > 0.12 or p.step == p.steps):
+            self._shown = now
+            self.live.update(self._render(p))
+
+    def _render(self, p: Progress) -> Group:
+        t = Table(show_header=True, header_style="bold", title=f"lensopt optimize — {p.phase}")
+        for col in ("step", "merit ½‖ℓ‖²", "λ", "ESR µm", "accepted", "rejected", "rays ok", "wall s"):
+            t.add_column(col, justify="right")
+        lam = "—" if p.damping != p.damping else f"{p.damping:.2e}"
+        t.add_row(f"{p.step}/{p.steps}", f"{p.merit:.6e}", lam, f"{p.esr_um:.3f}", str(p.accepted),
+                  str(p.rejected), f"{100 * p.valid_fraction:.1f} %", f"{p.elapsed_s:.0f}")
+        shares = Table(show_header=True, header_style="bold", title="share of the merit")
+        names = [n for n, v in p.shares.items() if v > 0 or n == "tra"]
+        for n in names:
+            shares.add_column(n, justify="right")
+        shares.add_row(*[f"{100 * p.shares[n]:.2f} %" for n in names])
+        notes = Text("\n".join(self.events[-4:]))
+        return Group(t, shares, notes)
+
+
+def summary(result: OptimizeResult, start: dict[str, Any], final: dict[str, Any],
+            constraints: dict[str, Any], output: str) -> dict[str, Any]:
+    """The machine-readable summary (``--json``): start and final trace reports of the written lens."""
+    return {
+        "output": output,
+        "steps": result.steps,
+        "stop_reason": result.stop_reason,
+        "interrupted": result.interrupted,
+        "elapsed_s": result.elapsed_s,
+        "start": {"effective_spot_radius_um": start["effective_spot_radius_um"],
+                  "first_order": start["first_order"]},
+        "final": {"effective_spot_radius_um": final["effective_spot_radius_um"],
+                  "first_order": final["first_order"], "fields": final["fields"], "sampling": final["sampling"]},
+        "bound_glasses": [{"surface": b.surface, "name": b.name,
+                           "material": b.material if isinstance(b.material, str) else b.material.model_dump(),
+                           "distance": b.distance} for b in result.bound],
+        "constraints": constraints,
+        "warning": result.warning,
+        "history": [list(h) for h in result.history],
+    }
+
+
+def render_summary(console: Console, s: dict[str, Any]) -> None:
+    """Final tables: spot size start → end, first-order data, constraint values, glasses."""
+    fin, st = s["final"], s["start"]
+    head = "interrupted — best lens so far" if s["interrupted"] else f"stopped: {s['stop_reason']}"
+    console.print(f"[bold]{head}[/] after {s['steps']} steps, {s['elapsed_s']:.1f} s; written to {s['output']}")
+    console.print(f"effective spot radius ({fin['sampling']}): {st['effective_spot_radius_um']:.4f} µm → "
+                  f"[bold]{fin['effective_spot_radius_um']:.4f} µm[/]")
+    fo = fin["first_order"]
+    console.print(f"EFL {fo['efl']:.6f} mm, f/{fo['fnumber']:.4f}, total track {fo['total_track']:.4f} mm, "
+                  f"paraxial image height {fo['paraxial_image_height']:.4f} mm")
+    c = s["constraints"]
+    if "gaps" in c:
+        t = Table(title=f"ray path per gap (mm; {c['sampling']}, valid rays)", header_style="bold")
+        for col in ("gap", "kind", "centre", "min t_z", "max t_z", "bounds", "ok"):
+            t.add_column(col, justify="right")
+        for g in c["gaps"]:
+            upper = "∞" if g["upper"] is None else f"{g['upper']:.3f}"
+            t.add_row(str(g["gap"]), g["kind"], f"{g['centre']:.4f}", f"{g['min']:.4f}", f"{g['max']:.4f}",
+                      f"[{g['lower']:.3f}, {upper}]", "yes" if g["satisfied"] else "[red]no[/]")
+        console.print(t)
+    dist = max(abs(v) for v in c["distortion_percent"])
+    console.print(f"max angle of incidence/refraction {c['max_angle_deg']:.2f}°, max surface normal "
+                  f"{c['max_normal_deg']:.2f}°, max |distortion| {dist:.3f} %, min relative illumination "
+                  f"{min(c['relative_illumination']):.3f}, failed rays {c['failed_rays']}/{c['rays']}")
+    mats = ", ".join(f"{m['material']} (nd {m['nd']:.5f}, vd {m['vd']:.2f})" for m in c["materials"])
+    console.print(f"materials: {mats}")
+    console.print("constraints satisfied: " + ("[green]yes[/]" if c["satisfied"] else "[red]no[/]"))
+    if s["warning"]:
+        console.print(f"[yellow]warning:[/] {s['warning']}")

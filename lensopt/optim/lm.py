@@ -1,0 +1,175 @@
+"""Levenberg–Marquardt (S2.3.2, Table S7) on a residual function ℓ(θ) with a forward-mode Jacobian.
+
+Each step solves the damped linear least-squares problem (S63)
+
+    min_δ ‖ℓ + J δ‖² + λ ‖D δ‖²
+
+as an augmented least-squares system with an SVD-based solver (never the normal equations), so a
+rank-deficient J (variables the merit does not see, or that act alike) gives a finite step instead
+of NaN. D is the running maximum of the column norms of J (S64), started from
+max(‖J_n‖, ε) (S65). λ is divided by DF after a step that lowers the merit and multiplied by IF
+otherwise; a step whose merit exceeds TF times the current one, or that makes the lens non-physical,
+is rejected (the Jacobian is reused for the next try).
+
+Parameter evaporation (S2.3.2): besides the running-max D, columns of J whose norm is below
+``DEAD_COLUMN`` times the largest one are treated as exactly zero (their step is then exactly 0). Such
+columns carry only round-off (a variable the merit does not see, e.g. the radius of a surface between
+two identical media); with D at its floor ε even that noise would otherwise drive long random steps.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from lensopt.spec.optim import LMSpec
+
+__all__ = ["Trial", "StepInfo", "LevenbergMarquardt", "damped_step"]
+
+MIN_DAMPING = 1e-15
+DEAD_COLUMN = 1e-9
+
+
+@dataclass(frozen=True)
+class Trial:
+    """What the optimizer needs from one evaluation of ℓ at a trial point."""
+
+    residuals: Tensor
+    physical: bool
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class StepInfo:
+    """Outcome of one LM iteration."""
+
+    accepted: bool
+    merit: float
+    damping: float
+    reason: str
+
+
+def damped_step(J: Tensor, r: Tensor, D: Tensor, damping: float) -> Tensor:
+    """(N,) δ minimising ‖r + J δ‖² + λ‖D δ‖² (S63) through the augmented least-squares system.
+
+    Solved in the scaled variables y = D δ, ``[J D⁻¹; √λ I] y = [−r; 0]`` (SVD-based ``gelsd`` on the
+    CPU, never the normal equations): the columns of J D⁻¹ have comparable norms and the singular
+    values stay ≥ √λ, so a rank-deficient J (two equal columns) still gives a finite step. Zero
+    columns (variables the merit does not see) are left out: their step is exactly 0.
+    """
+    N = J.shape[1]
+    live = torch.linalg.vector_norm(J, dim=0) > 0
+    Jl, Dl = J[:, live], D[live]
+    n = Jl.shape[1]
+    A = torch.cat([Jl / Dl, (damping**0.5) * torch.eye(n, dtype=J.dtype, device=J.device)])
+    b = torch.cat([-r, torch.zeros(n, dtype=r.dtype, device=r.device)])
+    driver = "gelsd" if A.device.type == "cpu" else None
+    y = torch.linalg.lstsq(A, b.unsqueeze(-1), driver=driver).solution.squeeze(-1)
+    step = torch.zeros(N, dtype=J.dtype, device=J.device)
+    step[live] = y / Dl
+    return step
+
+
+class LevenbergMarquardt:
+    """LM state machine.
+
+    Args:
+        theta: (N,) starting point.
+        jacobian: θ ↦ (J (M, N), ℓ (M,)) — the forward-mode Jacobian of the residual function.
+        evaluate: θ ↦ Trial — ℓ at a trial point plus the physical check.
+        settings: Table S7 parameters and stopping rules.
+    """
+
+    def __init__(self, theta: Tensor, jacobian: Callable[[Tensor], tuple[Tensor, Tensor]],
+                 evaluate: Callable[[Tensor], Trial], settings: LMSpec | None = None) -> None:
+        self.settings = settings or LMSpec()
+        self.theta = theta.detach().clone()
+        self._jacobian = jacobian
+        self._evaluate = evaluate
+        self.damping = self.settings.damping
+        self.D: Tensor | None = None
+        self._J: Tensor | None = None
+        self._r: Tensor | None = None
+        self._scale_for_D: Tensor | None = None
+        self.history: list[float] = []
+        self.accepted = 0
+        self.rejected = 0
+
+    @property
+    def residuals(self) -> Tensor | None:
+        """ℓ at the current θ (without row multipliers), once computed."""
+        return self._r
+
+    def merit(self, scale: Tensor) -> float:
+        """½‖s ⊙ ℓ(θ)‖² at the current θ."""
+        self._ensure_jacobian(scale)
+        return 0.5 * float(((scale * self._r) ** 2).sum())
+
+    def _ensure_jacobian(self, scale: Tensor) -> None:
+        if self._J is None:
+            J, r = self._jacobian(self.theta)
+            self._J, self._r = J.detach(), r.detach()
+            col = torch.linalg.vector_norm(scale[:, None] * self._J, dim=0)
+            col = torch.where(torch.isfinite(col), col, torch.zeros_like(col))
+            s = self.settings
+            if self.D is None:
+                self.D = col.clamp_min(s.epsilon)
+            else:
+                self.D = s.beta * torch.maximum(self.D, col) + (1 - s.beta) * col
+
+    def step(self, scale: Tensor) -> StepInfo:
+        """One iteration with row multipliers ``scale`` (M,) (1 everywhere for a fixed merit)."""
+        s = self.settings
+        self._ensure_jacobian(scale)
+        J, r = scale[:, None] * self._J, scale * self._r
+        col = torch.linalg.vector_norm(J, dim=0)
+        J = torch.where(col > DEAD_COLUMN * col.max(), J, torch.zeros_like(J))
+        merit = 0.5 * float((r**2).sum())
+        delta = damped_step(J, r, self.D, self.damping)
+        if not bool(torch.isfinite(delta).all()):
+            return self._reject(merit, "non-finite step")
+        trial = self._evaluate(self.theta + delta)
+        if not trial.physical:
+            return self._reject(merit, trial.reason)
+        new = 0.5 * float(((scale * trial.residuals) ** 2).sum())
+        accept = new < merit if s.tolerance == 1.0 else new <= s.tolerance * merit
+        if new < merit:
+            self.damping = max(self.damping / s.decrease, MIN_DAMPING)
+        else:
+            self.damping *= s.increase
+        if not accept:
+            self.rejected += 1
+            self.history.append(merit)
+            return StepInfo(False, merit, self.damping, "merit rose")
+        self.theta = self.theta + delta
+        self._J, self._r = None, trial.residuals.detach()
+        self.accepted += 1
+        self.history.append(new)
+        return StepInfo(True, new, self.damping, "")
+
+    def _reject(self, merit: float, reason: str) -> StepInfo:
+        self.damping *= self.settings.increase
+        self.rejected += 1
+        self.history.append(merit)
+        return StepInfo(False, merit, self.damping, reason)
+
+    def stop_reason(self) -> str | None:
+        """Why to stop now (λ ceiling, merit stalled), or None."""
+        s = self.settings
+        if self.damping > s.max_damping:
+            return f"damping λ above {s.max_damping:g}"
+        h = self.history
+        if len(h) > s.patience and h[-1 - s.patience] > 0:
+            if (h[-1 - s.patience] - h[-1]) / h[-1 - s.patience] < s.merit_tolerance:
+                return f"merit changed by less than {s.merit_tolerance:g} over {s.patience} steps"
+        return None
+
+    def reset(self) -> None:
+        """Back to the initial damping and damping matrix (after binding glasses, S4.1.3)."""
+        self.damping = self.settings.damping
+        self.D = None
+        self._J = None
+        self.history.clear()

@@ -1,0 +1,329 @@
+"""The optimization problem of a spec: θ, the one residual function ℓ(θ), its Jacobian, the checks
+that reject non-physical steps, binding of glasses to the catalog, and θ → spec (DESIGN.md rule 4).
+
+``residuals(θ)`` is pure: it rebuilds the lens from θ, applies the solves, traces the optimization
+rays with ``trace_bundle`` (so aiming, vignetting and apertures of the optics core apply) and
+concatenates the residual groups, each multiplied by its static weight. Time-varying weights (the
+glass-catalog schedule) are row multipliers applied by the optimizer (``row_scale``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from lensopt.analysis.spot import spot_stats
+from lensopt.errors import LensoptError
+from lensopt.materials import design_catalog
+from lensopt.optics.bundle import Bundle, trace_bundle
+from lensopt.optics.lens import Lens
+from lensopt.optics.paraxial import first_order
+from lensopt.optics.sampling import PupilSampling
+from lensopt.optim import residuals as terms
+from lensopt.optim.glass import (
+    GlassMesh,
+    GlassSpace,
+    catalog_distance,
+    glass_mesh,
+    glass_space,
+    mesh_distance,
+    schedule_weight,
+)
+from lensopt.optim.rays import head, with_rim
+from lensopt.optim.solves import apply_solves, resolve_solves, solved_quantities
+from lensopt.optim.variables import Parameterization
+from lensopt.spec.models import LensSpec
+from lensopt.spec.optim import OptimizeSpec
+
+__all__ = ["Evaluation", "Problem"]
+
+GROUPS = ("tra", "ray_path", "ray_angle", "surface_normal", "distortion", "relative_illumination",
+          "glass_mesh", "glass_catalog", "ray_failure")
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """ℓ(θ) with what the optimizer needs to accept or reject a step.
+
+    Attributes:
+        residuals: (M,) statically weighted residuals.
+        physical: whether the lens is physical (finite residuals, solves well posed, positive glass
+            thicknesses and image distance, glass variables in the model's range, some ray traced).
+        reason: why not, for messages.
+        valid_fraction: share of optimization rays that reached the image.
+    """
+
+    residuals: Tensor
+    physical: bool
+    reason: str
+    valid_fraction: float
+
+
+class Problem:
+    """Variables, solves and residual groups of ``spec`` (its ``[optimize]`` section or defaults).
+
+    Args:
+        spec: the lens spec with ``vary`` lists.
+        seed: seed of the pupil jitter (``rings`` sampling).
+        dtype: float64 for design work.
+    """
+
+    def __init__(self, spec: LensSpec, *, seed: int = 0, dtype: torch.dtype = torch.float64) -> None:
+        self.opt: OptimizeSpec = spec.optimize or OptimizeSpec()
+        self.seed = seed
+        self.dtype = dtype
+        self.solves = resolve_solves(spec)
+        skip = solved_quantities(self.solves, len(spec.surfaces))
+        varies_glass = any("material" in s.vary for s in spec.surfaces)
+        self.space: GlassSpace | None = None
+        if varies_glass:
+            try:
+                cat = design_catalog(self.opt.catalog)
+            except LensoptError as err:
+                raise err.at("optimize.catalog") from None
+            self.space = glass_space(cat, self.opt.glass_parameters)
+        probe = Parameterization(spec, alpha=1.0, glass=self.space, skip=skip, dtype=dtype)
+        alpha = self.opt.alpha
+        if alpha is None:
+            alpha = float(first_order(probe.model.lens, probe.model.system).epd) / 2.0
+        self.param = Parameterization(spec, alpha=alpha, glass=self.space,
+                                      asphere_basis=self.opt.asphere_basis, skip=skip, dtype=dtype)
+        self.spec = self.param.spec
+        self.model = self.param.model
+        self.system = self.model.system
+        self.alpha = alpha
+        self.defocus = self.spec.image.defocus
+        cons = self.opt.constraints
+        self.mesh: GlassMesh | None = None
+        if self.space is not None and cons.glass_mesh is not None:
+            self.mesh = glass_mesh(self.space, cons.glass_mesh.max_edge)
+        self.sampling = PupilSampling.parse(self.opt.sampling, seed=seed, path="optimize.sampling")
+        self.num_spot = self.sampling.points(dtype=dtype).shape[0]
+        self.pupil = with_rim(self.sampling.points(dtype=dtype), self.opt.rim_rays, half=self.sampling.half)
+        fw = self.system.field_weights or (1.0,) * self.system.num_fields
+        self.field_weights = torch.tensor(fw, dtype=dtype)
+        lens0 = self.model.lens
+        self.glass_gap = [not s.is_air for s in self.spec.surfaces]
+        self.interfaces = [
+            s for s in range(lens0.num_surfaces)
+            if lens0.shapes[s].diffractive or bool((lens0.index[s] != lens0.index[s + 1]).any())
+            or ("material" in self.spec.surfaces[s].vary)
+            or (s > 0 and "material" in self.spec.surfaces[s - 1].vary)
+        ]
+        self.failure_penalty = cons.ray_failure.penalty_mm or alpha
+        self.theta0 = self.param.initial()
+        self.slices = self._layout()
+        self.size = max((sl.stop for sl in self.slices.values()), default=0)
+
+    # ------------------------------------------------------------------------------------ structure
+
+    @property
+    def num_variables(self) -> int:
+        return self.param.size
+
+    @property
+    def num_glasses(self) -> int:
+        return len(self.param.of_kind("glass"))
+
+    def _weight(self, group: str) -> float | None:
+        """Static weight of a group, None when the group is off."""
+        cons = self.opt.constraints
+        if group == "tra":
+            return self.opt.tra.weight
+        if group in ("glass_mesh", "glass_catalog"):
+            if self.num_glasses == 0 or getattr(cons, group) is None:
+                return None
+            return cons.glass_mesh.weight if group == "glass_mesh" else 1.0
+        if group == "ray_failure":
+            return cons.ray_failure.weight or None
+        spec = getattr(cons, group)
+        return None if spec is None else spec.weight
+
+    def _layout(self) -> dict[str, slice]:
+        with torch.no_grad():
+            parts = self.terms(self.theta0)
+        out, pos = {}, 0
+        for name, t in parts.items():
+            out[name] = slice(pos, pos + t.shape[0])
+            pos += t.shape[0]
+        return out
+
+    # -------------------------------------------------------------------------------- lens and rays
+
+    def lens(self, theta: Tensor) -> tuple[Lens, Tensor]:
+        """The solved lens for θ and whether its solves were well posed."""
+        return apply_solves(self.param.lens(theta), self.system, self.solves, defocus=self.defocus)
+
+    def bundle(self, lens: Lens) -> Bundle:
+        return trace_bundle(lens, self.system, self.pupil, half_pupil=self.sampling.half, record=True)
+
+    def gap_bounds(self, lens: Lens) -> tuple[Tensor, Tensor]:
+        """(S,), (S,) lower and upper t_z bounds per gap (mm), relative to centre thickness in glass."""
+        rp = self.opt.constraints.ray_path
+        S = lens.num_surfaces
+        big = torch.full((), terms.BIG, dtype=lens.dtype)
+        lo, hi = [], []
+        for s in range(S):
+            ct = lens.thickness[s]
+            if s == S - 1:
+                low = torch.zeros_like(ct) + (rp.image_min if rp.image_min is not None else -terms.BIG)
+                high = torch.zeros_like(ct) + (rp.image_max if rp.image_max is not None else terms.BIG)
+            elif self.glass_gap[s]:
+                low = torch.zeros_like(ct) + rp.glass_min
+                high = big + 0 * ct if rp.glass_max is None else torch.zeros_like(ct) + rp.glass_max
+                if rp.glass_ratio is not None:
+                    low = torch.maximum(low, ct / rp.glass_ratio)
+                    high = torch.minimum(high, ct * rp.glass_ratio)
+            else:
+                low = torch.zeros_like(ct) + rp.air_min
+                high = big + 0 * ct if rp.air_max is None else torch.zeros_like(ct) + rp.air_max
+            for g in rp.gaps:
+                if g.gap % S == s:
+                    low = low if g.min is None else torch.zeros_like(ct) + g.min
+                    high = high if g.max is None else torch.zeros_like(ct) + g.max
+            lo.append(low)
+            hi.append(high)
+        return torch.stack(lo), torch.stack(hi)
+
+    # ----------------------------------------------------------------------------------- residuals
+
+    def terms(self, theta: Tensor) -> dict[str, Tensor]:
+        """Residual groups (statically weighted) of θ, in a fixed order; groups that are off are absent."""
+        lens, _ = self.lens(theta)
+        return self._terms(theta, lens, self.bundle(lens))
+
+    def _terms(self, theta: Tensor, lens: Lens, bundle: Bundle) -> dict[str, Tensor]:
+        """Spot terms (TRA, distortion, illumination) from the spot sample; geometric constraints and
+        failures from every ray, the rim rays included."""
+        cons = self.opt.constraints
+        ww = self.system.wavelength_weights
+        spot = head(bundle, self.num_spot)
+        stats = spot_stats(spot, ww, self.field_weights)
+        out: dict[str, Tensor] = {}
+        for group in GROUPS:
+            w = self._weight(group)
+            if w is None:
+                continue
+            if group == "tra":
+                r = terms.tra(spot, stats, ww, self.field_weights)
+            elif group == "ray_path":
+                r = terms.ray_path(bundle, *self.gap_bounds(lens))
+            elif group == "ray_angle":
+                r = terms.ray_angle(bundle, self.interfaces, cons.ray_angle.max_deg)
+            elif group == "surface_normal":
+                refracting = [s for s in self.interfaces if not self.spec.surfaces[s].type == "plane"]
+                r = terms.surface_normal(bundle, refracting, cons.surface_normal.max_deg)
+            elif group == "distortion":
+                r = terms.distortion(lens, self.system, spot, stats, cons.distortion.max_percent / 100)
+            elif group == "relative_illumination":
+                r = terms.relative_illumination(spot, ww, cons.relative_illumination.min)
+            elif group == "glass_mesh":
+                r = mesh_distance(self.param.glass_g(theta), self.mesh)
+            elif group == "glass_catalog":
+                r = catalog_distance(self.param.glass_g(theta), self.space)
+            else:
+                r = terms.failures(bundle, lens, self.failure_penalty)
+            out[group] = r * w
+        return out
+
+    def residuals(self, theta: Tensor) -> Tensor:
+        """(M,) ℓ(θ): the one residual function (pure in θ)."""
+        return torch.cat(list(self.terms(theta).values()))
+
+    def jacobian(self, theta: Tensor) -> tuple[Tensor, Tensor]:
+        """(M, N) Jacobian by forward-mode AD (``torch.func.jacfwd``) and ℓ(θ) (M,)."""
+        def both(t: Tensor) -> tuple[Tensor, Tensor]:
+            r = self.residuals(t)
+            return r, r
+
+        J, r = torch.func.jacfwd(both, has_aux=True)(theta)
+        return J, r
+
+    def schedules(self) -> dict[str, list[tuple[float, float]]]:
+        """Weight schedules of the active groups (the glass-catalog one, and any group's own)."""
+        out = {}
+        for name in self.slices:
+            spec = self.opt.tra if name == "tra" else getattr(self.opt.constraints, name, None)
+            knots = getattr(spec, "schedule", None)
+            if knots:
+                out[name] = list(knots)
+        return out
+
+    def row_scale(self, fraction: float) -> Tensor:
+        """(M,) time-varying multipliers of the residual rows at ``fraction`` of the run."""
+        scale = torch.ones(self.size, dtype=self.dtype)
+        for name, knots in self.schedules().items():
+            scale[self.slices[name]] = schedule_weight(knots, fraction)
+        return scale
+
+    def schedules_settled(self, fraction: float) -> bool:
+        """Whether every weight schedule has reached its final value (the merit no longer changes)."""
+        return all(schedule_weight(k, fraction) == schedule_weight(k, 1.0) for k in self.schedules().values())
+
+    # ---------------------------------------------------------------------------- step acceptance
+
+    def evaluate(self, theta: Tensor) -> Evaluation:
+        """ℓ(θ) (no gradients) and whether the lens is physical."""
+        with torch.no_grad():
+            lens, solved = self.lens(theta)
+            reason = self._lens_reason(theta, lens, bool(solved))
+            if reason:
+                return Evaluation(torch.full((self.size,), math.nan, dtype=self.dtype), False, reason, 0.0)
+            bundle = self.bundle(lens)
+            r = torch.cat(list(self._terms(theta, lens, bundle).values()))
+            valid = float(bundle.result.valid.to(self.dtype).mean())
+        if not bool(torch.isfinite(r).all()):
+            reason = "non-finite residuals"
+        elif valid == 0.0:
+            reason = "no ray reaches the image"
+        return Evaluation(r, not reason, reason, valid)
+
+    def failure_summary(self, theta: Tensor) -> tuple[int, int, dict[str, int]]:
+        """(failed rays, rays, failed rays per reason) of the optimization rays at θ."""
+        from lensopt.optics.trace import REASONS
+
+        with torch.no_grad():
+            lens, _ = self.lens(theta)
+            status = self.bundle(lens).result.status
+        counts = {REASONS[r]: int((status == r).sum()) for r in REASONS if bool((status == r).any())}
+        return int((status != 0).sum()), int(status.numel()), counts
+
+    def check(self, theta: Tensor) -> str:
+        """Why the lens of θ is non-physical ("" when it is fine); paraxial only, no ray trace."""
+        with torch.no_grad():
+            lens, solved = self.lens(theta)
+            return self._lens_reason(theta, lens, bool(solved))
+
+    def _lens_reason(self, theta: Tensor, lens: Lens, solved: bool) -> str:
+        if not bool(torch.isfinite(theta).all()):
+            return "non-finite variables"
+        if not solved:
+            return "a solve has no solution (zero slope)"
+        for s, glass in enumerate(self.glass_gap):
+            if glass and not float(lens.thickness[s]) > 0:
+                return f"surfaces[{s}].thickness: glass element thickness {float(lens.thickness[s]):.4g} mm ≤ 0"
+        if not float(lens.thickness[-1]) > 0:
+            return f"image distance {float(lens.thickness[-1]):.4g} mm ≤ 0"
+        if not bool(torch.isfinite(lens.curvature).all()):
+            return "non-finite curvature"
+        x = self.param.glass_physical(theta)
+        for i, (nd, vd, dp) in enumerate(x.tolist()):
+            if not (1.0 < nd < 3.0 and 10.0 <= vd <= 120.0 and abs(dp) <= 0.1):
+                return f"glass {i}: nd={nd:.4f}, vd={vd:.2f}, ΔPgF={dp:.4f} outside the model's range"
+        return ""
+
+    def merits(self, r: Tensor, scale: Tensor | None = None) -> dict[str, float]:
+        """½‖ℓ_group‖² of every group (with the row multipliers ``scale``)."""
+        if scale is not None:
+            r = r * scale
+        return {name: 0.5 * float((r[sl] ** 2).sum()) for name, sl in self.slices.items()}
+
+    def esr_mm(self, r: Tensor) -> float:
+        """Effective spot radius of the optimization rays from the TRA rows (‖ℓ_TRA‖/w_TRA)."""
+        w = self.opt.tra.weight
+        if "tra" not in self.slices or w == 0:
+            return math.nan
+        return float(torch.linalg.vector_norm(r[self.slices["tra"]])) / w

@@ -1,0 +1,170 @@
+"""Residual terms (S2.2, Table S6): pure tensor functions of a traced bundle (or glass variables).
+
+Each returns a flat vector whose length depends only on the bundle's shape, never on the data
+(DESIGN.md rule 1): failed rays keep their rows with value 0 (and the ``failures`` term counts them).
+ramp(x) = max(x, 0). n_r = F·W·P rays; lengths in mm.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor
+
+from lensopt.analysis.distortion import distortion as distortion_per_field
+from lensopt.analysis.illumination import relative_illumination_std
+from lensopt.analysis.spot import SpotStats
+from lensopt.optics.bundle import Bundle
+from lensopt.optics.lens import Lens, System
+
+__all__ = [
+    "BIG",
+    "tra",
+    "gap_lengths",
+    "ray_path",
+    "ray_angle",
+    "surface_normal",
+    "distortion",
+    "relative_illumination",
+    "failure_margin",
+    "failures",
+]
+
+BIG = 1e9
+"""Stand-in for an absent bound (mm): finite, so that values and tangents stay finite."""
+
+
+def _ramp(x: Tensor) -> Tensor:
+    return torch.clamp_min(x, 0.0)
+
+
+def tra(bundle: Bundle, stats: SpotStats, wavelength_weights: Tensor, field_weights: Tensor) -> Tensor:
+    """(2 n_r,) transverse ray aberrations about each field's weighted centroid (S37–S39).
+
+    Every ray of field h, wavelength w is weighted by sqrt(f_h/Σf · W_w/ΣW / P), so that with no
+    failed rays ‖ℓ_TRA‖² = Σ_h f̂_h SR_h² = ESR² (S40 generalized to weights).
+    """
+    res = bundle.result
+    F, W, P = res.status.shape
+    xy = res.pos[..., :2] - stats.centroid[:, None, None, :]
+    ww = wavelength_weights.to(xy.dtype) / wavelength_weights.sum()
+    fw = field_weights.to(xy.dtype) / field_weights.sum()
+    scale = torch.sqrt(fw[:, None, None] * ww[None, :, None] / P)
+    d = torch.where(res.valid.unsqueeze(-1), xy * scale.unsqueeze(-1), 0.0)
+    return d.reshape(-1)
+
+
+def gap_lengths(bundle: Bundle) -> Tensor:
+    """(S, F, W, P) axial distance t_z each ray travels in the gap after every surface (needs a
+    bundle traced with ``record=True``); the last gap ends on the image surface."""
+    res = bundle.result
+    z = torch.stack([h.pos[..., 2] for h in res.hits] + [res.pos[..., 2]])
+    return z[1:] - z[:-1]
+
+
+def ray_path(bundle: Bundle, lower: Tensor, upper: Tensor) -> Tensor:
+    """(S n_r,) ray path residuals (S41–S42) for per-gap bounds ``lower``/``upper`` (S,) in mm."""
+    tz = gap_lengths(bundle)
+    lo, hi = lower[:, None, None, None], upper[:, None, None, None]
+    d = _ramp(torch.maximum(tz - hi, lo - tz))
+    d = torch.where(bundle.result.valid.unsqueeze(0), d, 0.0)
+    return d.reshape(-1) / math.sqrt(bundle.result.status.numel())
+
+
+def ray_angle(bundle: Bundle, surfaces: list[int], max_deg: float) -> Tensor:
+    """(2 I n_r,) ray angle residuals (S43–S45) at the interfaces ``surfaces``: ramp(cos²θmax − ζ)
+    for ζ_I = cos² of incidence and ζ_R = cos² of refraction (negative on TIR)."""
+    res = bundle.result
+    c2 = math.cos(math.radians(max_deg)) ** 2
+    out = []
+    for s in surfaces:
+        h = res.hits[s]
+        out += [_ramp(c2 - h.cos2_in), _ramp(c2 - h.cos2_out)]
+    if not out:
+        return res.pos.new_zeros(0)
+    d = torch.where(res.valid.unsqueeze(0), torch.stack(out), 0.0)
+    return d.reshape(-1) / math.sqrt(res.status.numel())
+
+
+def surface_normal(bundle: Bundle, surfaces: list[int], max_deg: float) -> Tensor:
+    """(I n_r,) surface normal residuals (S46–S47): ramp(cos²θmax − n_z²) where rays hit."""
+    res = bundle.result
+    c2 = math.cos(math.radians(max_deg)) ** 2
+    if not surfaces:
+        return res.pos.new_zeros(0)
+    nz2 = torch.stack([res.hits[s].normal[..., 2] ** 2 for s in surfaces])
+    d = torch.where(res.valid.unsqueeze(0), _ramp(c2 - nz2), 0.0)
+    return d.reshape(-1) / math.sqrt(res.status.numel())
+
+
+def distortion(lens: Lens, system: System, bundle: Bundle, stats: SpotStats, max_fraction: float) -> Tensor:
+    """(F,) distortion residuals (S48–S50): ramp(|D_h| − D_max)/√n_h, D as a fraction."""
+    d = distortion_per_field(lens, system, bundle, stats)
+    return _ramp(d.abs() - max_fraction) / math.sqrt(d.shape[0])
+
+
+def relative_illumination(bundle: Bundle, wavelength_weights: Tensor, minimum: float) -> Tensor:
+    """(F,) relative illumination residuals (S52–S54): ramp(R_min − R_h)/√n_h, all-ray estimate."""
+    r = relative_illumination_std(bundle, wavelength_weights)
+    return _ramp(minimum - r) / math.sqrt(r.shape[0])
+
+
+def failure_margin(bundle: Bundle, lens: Lens) -> Tensor:
+    """(F, W, P) how far each failed ray is from passing (dimensionless, ≥ 0; 0 for valid rays), at
+    the surface where it failed (needs ``record=True``):
+
+    - total internal reflection: −cos²θ' there (cos²θ' < 0 on TIR);
+    - missed surface: the larger of (1 + κ) c² h² − 1, with h the ray's height on the vertex plane
+      (beyond the conic's rim), and c² d² − 1, with d the distance of the ray's line from the centre
+      of curvature (a line that passes the sphere by);
+    - clipped: h²/sd² − 1 with h the height on the surface.
+    Other failures (Newton, grazing the image) get 0 and cost only the constant.
+    """
+    from lensopt.optics.trace import Status
+
+    res = bundle.result
+    at = res.failed_at
+    margin = torch.zeros_like(res.pos[..., 0])
+    if at is None or not res.hits:
+        return margin
+    vertex = lens.vertex_z()
+    start = bundle.rays.pos.expand_as(res.pos)
+    for s in range(lens.num_surfaces):
+        here = at == s
+        h = res.hits[s]
+        prev = start if s == 0 else res.hits[s - 1].pos
+        dz = h.dir_in[..., 2]
+        safe = torch.where(dz.abs() > 1e-12, dz, torch.ones_like(dz))
+        t = (vertex[s] - prev[..., 2]) / safe
+        xy = prev[..., :2] + t.unsqueeze(-1) * h.dir_in[..., :2]
+        u_plane = (xy**2).sum(-1)
+        c = lens.curvature[s]
+        missed = (1.0 + lens.conic[s]) * c**2 * u_plane - 1.0
+        centre = 1.0 / torch.where(c != 0, c, torch.ones_like(c))
+        to_centre = torch.stack(
+            [-prev[..., 0], -prev[..., 1], vertex[s] + centre - prev[..., 2]], -1)
+        d2 = (torch.linalg.cross(to_centre, h.dir_in) ** 2).sum(-1)
+        missed = torch.maximum(missed, torch.where(c != 0, c**2 * d2 - 1.0, torch.zeros_like(d2)))
+        tir = -h.cos2_out
+        sd2 = lens.semi_diameter[s] ** 2
+        u_hit = (h.pos[..., :2] ** 2).sum(-1)
+        clipped = u_hit / torch.where(sd2 > 0, sd2, torch.ones_like(sd2)) - 1.0
+        m = torch.where(res.status == Status.TIR, tir, torch.zeros_like(tir))
+        m = torch.where(res.status == Status.MISSED, missed, m)
+        m = torch.where(res.status == Status.CLIPPED, clipped, m)
+        margin = torch.where(here, _ramp(m), margin)
+    return margin
+
+
+def failures(bundle: Bundle, lens: Lens, penalty_mm: float) -> Tensor:
+    """(n_r,) ``penalty_mm (1 + margin)/√n_r`` for every failed ray, 0 for the others.
+
+    The constant makes any step that fails rays raise the merit (so it is rejected); the margin
+    (``failure_margin``) gives failed rays a gradient towards passing, so a start with many failed
+    rays can recover.
+    """
+    res = bundle.result
+    bad = (~res.valid).to(res.pos.dtype)
+    margin = failure_margin(bundle, lens)
+    return (bad * penalty_mm * (1.0 + margin)).reshape(-1) / math.sqrt(res.status.numel())

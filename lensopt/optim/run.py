@@ -1,0 +1,198 @@
+"""The optimization driver: phases (glasses free, then bound to the catalog, S4.1.3), the glass
+catalog weight schedule, stopping rules, progress reports, Ctrl-C. Library code: no printing; the
+CLI renders the ``Progress`` records it receives."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import torch
+
+from lensopt.errors import LensoptError
+from lensopt.optim.adam import AdamOptimizer
+from lensopt.optim.lm import LevenbergMarquardt, Trial
+from lensopt.optim.problem import Problem
+from lensopt.optim.writeback import BoundGlass, bind_glasses, to_spec
+from lensopt.spec.models import LensSpec
+
+__all__ = ["Progress", "OptimizeResult", "OptimizeError", "optimize", "make_optimizer"]
+
+
+class OptimizeError(LensoptError):
+    """The optimization cannot start or go on (e.g. no ray reaches the image)."""
+
+
+@dataclass(frozen=True)
+class Progress:
+    """One step, as the live display shows it.
+
+    Attributes:
+        step, steps: step number (1-based) and the planned total.
+        phase: ``glasses free``, ``glasses bound`` or ``fixed glasses``.
+        merit: ½‖ℓ‖² after the step (current weights).
+        damping: LM damping λ (NaN for Adam).
+        esr_um: effective spot radius of the optimization rays, µm.
+        accepted, rejected: step counts so far (this phase).
+        last_accepted: whether this step was accepted.
+        shares: each residual group's share of the merit.
+        valid_fraction: share of optimization rays that reach the image.
+        event: a note (binding, rejection reason), or "".
+        elapsed_s: wall time since the start.
+    """
+
+    step: int
+    steps: int
+    phase: str
+    merit: float
+    damping: float
+    esr_um: float
+    accepted: int
+    rejected: int
+    last_accepted: bool
+    shares: dict[str, float]
+    valid_fraction: float
+    event: str
+    elapsed_s: float
+
+
+@dataclass
+class OptimizeResult:
+    """What an optimization run produced.
+
+    Attributes:
+        spec: the optimized lens (values, solves and bound glasses written back).
+        problem: the problem of the last phase; ``theta`` its final variables.
+        steps: steps taken; stop_reason: why it stopped; interrupted: Ctrl-C.
+        bound: glasses bound to the catalog.
+        history: (step, elapsed s, merit, ESR µm) per step.
+        start_esr_um, start_merit: at the start point.
+        warning: set when optimization rays still fail at the end (how many, why).
+    """
+
+    spec: LensSpec
+    problem: Problem
+    theta: torch.Tensor
+    steps: int
+    stop_reason: str
+    interrupted: bool
+    bound: list[BoundGlass]
+    history: list[tuple[int, float, float, float]] = field(default_factory=list)
+    start_esr_um: float = float("nan")
+    start_merit: float = float("nan")
+    elapsed_s: float = 0.0
+    warning: str = ""
+
+
+def make_optimizer(problem: Problem, theta: torch.Tensor, method: str) -> LevenbergMarquardt | AdamOptimizer:
+    """An LM or Adam state machine on ``problem``'s residual function."""
+    if method == "lm":
+        def evaluate(t: torch.Tensor) -> Trial:
+            ev = problem.evaluate(t)
+            return Trial(ev.residuals, ev.physical, ev.reason)
+
+        return LevenbergMarquardt(theta, problem.jacobian, evaluate, problem.opt.lm)
+    if method == "adam":
+        return AdamOptimizer(theta, problem.residuals, problem.check, problem.opt.adam)
+    raise LensoptError("must be lm or adam", path="--optimizer", got=method)
+
+
+def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None = None, seed: int = 0,
+             callback: Callable[[Progress], None] | None = None) -> OptimizeResult:
+    """Optimize ``spec`` (its ``vary`` lists and ``[optimize]`` section).
+
+    Ctrl-C (KeyboardInterrupt) ends the run early; the result then holds the best lens so far.
+
+    Raises:
+        OptimizeError: nothing varies, or the start lens is not usable (the message says why).
+    """
+    t0 = time.perf_counter()
+    problem = Problem(spec, seed=seed)
+    opt = problem.opt
+    method = optimizer or opt.optimizer
+    total = steps if steps is not None else opt.steps
+    if problem.num_variables == 0:
+        raise OptimizeError("nothing to optimize: no surface has a vary list", path="surfaces")
+    start = problem.evaluate(problem.theta0)
+    if not start.physical:
+        raise OptimizeError(f"the start lens cannot be optimized: {start.reason}")
+    scale0 = problem.row_scale(0.0)
+    result = OptimizeResult(spec=spec, problem=problem, theta=problem.theta0, steps=0, stop_reason="",
+                            interrupted=False, bound=[],
+                            start_esr_um=1e3 * problem.esr_mm(start.residuals),
+                            start_merit=0.5 * float(((scale0 * start.residuals) ** 2).sum()))
+    bind_step = round(opt.bind_at * total) if problem.num_glasses and opt.bind_at < 1 else None
+    state = make_optimizer(problem, problem.theta0, method)
+    phase = "glasses free" if problem.num_glasses else "fixed glasses"
+    failing = 1.0 - start.valid_fraction
+    event = f"{100 * failing:.1f} % of the rays fail at the start" if failing > 0 else ""
+    k = 0
+    try:
+        while k < total:
+            if bind_step is not None and k >= bind_step and not result.bound:
+                problem, state, event = _bind(problem, state, result, method, seed)
+                phase = "glasses bound"
+            frac = k / total
+            scale = problem.row_scale(frac)
+            info = state.step(scale)
+            k += 1
+            result.steps = k
+            r = state.residuals
+            esr = 1e3 * problem.esr_mm(r) if r is not None else float("nan")
+            elapsed = time.perf_counter() - t0
+            result.history.append((k, elapsed, info.merit, esr))
+            if callback is not None:
+                merits = problem.merits(r, scale) if r is not None else {}
+                tot = sum(merits.values()) or 1.0
+                callback(Progress(k, total, phase, info.merit, state.damping, esr, state.accepted, state.rejected,
+                                  info.accepted, {n: m / tot for n, m in merits.items()},
+                                  _valid_fraction(problem, r), event or info.reason, elapsed))
+            event = ""
+            flat = problem.schedules_settled(frac)
+            reason = state.stop_reason()
+            if reason and (flat or reason.startswith("damping")):
+                if bind_step is not None and not result.bound:
+                    bind_step = k
+                    continue
+                result.stop_reason = reason
+                break
+        else:
+            result.stop_reason = f"{total} steps"
+        if bind_step is not None and not result.bound and bind_step <= k and not result.interrupted:
+            problem, state, _ = _bind(problem, state, result, method, seed)
+    except KeyboardInterrupt:
+        result.interrupted = True
+        result.stop_reason = "interrupted"
+    result.problem = problem
+    result.theta = state.theta
+    result.spec = to_spec(problem, result.theta)
+    failed, rays, reasons = problem.failure_summary(result.theta)
+    if failed:
+        why = ", ".join(f"{k}: {v}" for k, v in reasons.items())
+        result.warning = (f"{failed} of {rays} optimization rays still fail ({why}); the start may be too "
+                          "far from a working lens: change it, or run more steps")
+    result.elapsed_s = time.perf_counter() - t0
+    return result
+
+
+def _valid_fraction(problem: Problem, r: torch.Tensor | None) -> float:
+    """Share of rays that reach the image, from the ray-failure rows (1 when that group is off)."""
+    if r is None or "ray_failure" not in problem.slices:
+        return float("nan")
+    rows = r[problem.slices["ray_failure"]]
+    return float((rows == 0).to(r.dtype).mean())
+
+
+def _bind(problem: Problem, state, result: OptimizeResult, method: str, seed: int):  # noqa: ANN001, ANN202
+    """Bind glasses to the catalog, rebuild the problem without glass variables, reset the optimizer."""
+    spec, bound = bind_glasses(problem, state.theta)
+    if spec.optimize is not None and spec.optimize.sampling_after_binding:
+        spec.optimize = spec.optimize.model_copy(update={"sampling": spec.optimize.sampling_after_binding})
+    new = Problem(spec, seed=seed)
+    ev = new.evaluate(new.theta0)
+    if not ev.physical:
+        raise OptimizeError(f"binding the glasses to the catalog made the lens unusable: {ev.reason}")
+    result.bound = bound
+    names = ", ".join(b.name for b in bound)
+    return new, make_optimizer(new, new.theta0, method), f"bound glasses: {names}"

@@ -1,0 +1,89 @@
+"""Solves (Table S5) hold their targets exactly and are differentiable."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from lensopt.errors import SpecError
+from lensopt.optics.paraxial import first_order, trace_paraxial
+from lensopt.optim import Problem
+from lensopt.spec import parse_spec
+
+
+def _problem(cooke: dict, solves: list[dict], defocus: float = 0.0) -> Problem:
+    cooke["surfaces"][1]["vary"] = ["radius", "thickness"]
+    cooke["surfaces"][4]["vary"] = ["radius"]
+    cooke["optimize"]["solves"] = solves
+    cooke["image"] = {"defocus": defocus}
+    return Problem(parse_spec(cooke))
+
+
+def _perturbed(p: Problem) -> torch.Tensor:
+    return p.theta0 * torch.tensor([1.3, 0.9, 1.1], dtype=torch.float64)
+
+
+def test_efl_solve(cooke: dict) -> None:
+    p = _problem(cooke, [{"type": "efl", "surface": -1, "value": 47.0}])
+    lens, ok = p.lens(_perturbed(p))
+    assert bool(ok)
+    assert float(first_order(lens, p.system).efl) == pytest.approx(47.0, rel=1e-13)
+
+
+def test_image_height_solve_with_defocus(cooke: dict) -> None:
+    p = _problem(cooke, [{"type": "image_height", "surface": 5, "value": 17.5}], defocus=0.3)
+    lens, ok = p.lens(_perturbed(p))
+    assert bool(ok)
+    assert float(first_order(lens, p.system).paraxial_image_height) == pytest.approx(17.5, rel=1e-13)
+
+
+def test_ttl_then_efl_solve(cooke: dict) -> None:
+    p = _problem(cooke, [{"type": "efl", "value": 50.0}, {"type": "ttl", "value": 61.0}])
+    lens, _ = p.lens(_perturbed(p))
+    fo = first_order(lens, p.system)
+    assert float(fo.total_track) == pytest.approx(61.0, rel=1e-14)
+    assert float(fo.efl) == pytest.approx(50.0, rel=1e-13)
+
+
+def test_focus_solve_puts_the_image_at_the_paraxial_focus_plus_defocus(cooke: dict) -> None:
+    p = _problem(cooke, [{"type": "focus"}], defocus=0.25)
+    lens, _ = p.lens(_perturbed(p))
+    fo = first_order(lens, p.system)
+    # Infinite object: the paraxial focus is the back focal point (BFL from the last vertex).
+    assert float(lens.thickness[-1]) == pytest.approx(float(fo.bfl) + 0.25, rel=1e-13)
+    y, _ = trace_paraxial(lens, p.system.reference, torch.tensor(1.0, dtype=torch.float64),
+                          torch.tensor(0.0, dtype=torch.float64))
+    w = p.system.reference
+    # Marginal ray height at the image = defocus × its slope.
+    slope = (y[-1] - y[-2]) / lens.thickness[-1]
+    assert float(y[-1]) == pytest.approx(float(slope) * 0.25, rel=1e-10)
+    assert w == 1
+
+
+def test_solved_curvature_derivative_matches_finite_differences(cooke: dict) -> None:
+    p = _problem(cooke, [{"type": "efl", "surface": -1, "value": 50.0}])
+    theta = p.theta0.clone()
+
+    def solved_c(t: torch.Tensor) -> torch.Tensor:
+        return p.lens(t)[0].curvature[-1]
+
+    J = torch.func.jacfwd(solved_c)(theta)
+    h = 1e-6
+    for i in range(theta.shape[0]):
+        e = torch.zeros_like(theta)
+        e[i] = h
+        fd = (solved_c(theta + e) - solved_c(theta - e)) / (2 * h)
+        assert float(J[i]) == pytest.approx(float(fd), rel=1e-6, abs=1e-12)
+
+
+def test_solve_errors_name_the_field(cooke: dict) -> None:
+    cooke["surfaces"][0]["vary"] = ["thickness"]
+    cooke["optimize"]["solves"] = [{"type": "image_height", "surface": 1, "value": 10.0}]
+    with pytest.raises(SpecError, match=r"optimize\.solves\[0\]\.surface: an image_height solve must act"):
+        Problem(parse_spec(cooke))
+    cooke["optimize"]["solves"] = [{"type": "ttl", "value": 60.0}, {"type": "focus"}]
+    with pytest.raises(SpecError, match=r"optimize\.solves\[1\]: only one solve"):
+        parse_spec(cooke)
+    cooke["optimize"]["solves"] = [{"type": "efl"}]
+    with pytest.raises(SpecError, match=r"optimize\.solves\[0\]\.value: a efl solve needs a target"):
+        parse_spec(cooke)
