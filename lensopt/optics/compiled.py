@@ -76,7 +76,11 @@ def compiled_trace(
     if fn is None:
         fn = _cache[key] = _make_compiled(key)
     args = [getattr(lens, name) for name in _LENS_TENSORS]
-    args += [rays.pos, rays.dir, rays.wavelength]
+    # Component-major copies (x of every ray, then y, then z): the fused kernel then loads each
+    # component contiguously and vectorizes over rays; from the interleaved (*B, 3) layout Inductor
+    # falls back to scalar loops (about 2× slower, benchmarks/RESULTS.md).
+    pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
+    args += [_component_major(pos), _component_major(dir), rays.wavelength]
     if isinstance(fn, str):
         return trace(lens, rays, upto=upto, record=record, newton_iterations=newton_iterations)
     try:
@@ -93,6 +97,11 @@ def compiled_trace(
     pos, dir, status, backtrack, hits = out
     return RayTrace(pos=pos, dir=dir, status=status, backtrack=backtrack,
                     hits=tuple(SurfaceHit(*h) for h in hits))
+
+
+def _component_major(v: Tensor) -> Tensor:
+    """The same (*B, 3) values stored as three contiguous (*B) planes."""
+    return v.movedim(-1, 0).contiguous().movedim(0, -1)
 
 
 def clear_compiled_cache() -> None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-__all__ = ["bend"]
+__all__ = ["bend", "bend_xyz"]
 
 
 def bend(
@@ -40,18 +40,34 @@ def bend(
             evanescent diffracted order.
         fail: (*) bool, True where cos2_out < 0 (total internal reflection).
     """
-    cos_i = (dir * normal).sum(-1)
-    orient = torch.where(cos_i < 0, -torch.ones_like(cos_i), torch.ones_like(cos_i))
-    nrm = normal * orient.unsqueeze(-1)
+    g = None if grating is None else (grating[..., 0], grating[..., 1])
+    d, cos2_in, cos2_out, fail = bend_xyz(dir.unbind(-1), normal.unbind(-1), n1, 1.0 / n2, g)
+    return torch.stack(d, -1), cos2_in, cos2_out, fail
+
+
+def bend_xyz(
+    d: tuple[Tensor, Tensor, Tensor],
+    normal: tuple[Tensor, Tensor, Tensor],
+    n1: Tensor,
+    inv_n2: Tensor,
+    grating: tuple[Tensor, Tensor] | None = None,
+) -> tuple[tuple[Tensor, Tensor, Tensor], Tensor, Tensor, Tensor]:
+    """``bend`` on components: directions and normals as (x, y, z) tensors of shape (*), the index
+    after the interface as its reciprocal ``1/n'`` (precomputed per medium), the grating vector as its
+    (x, y) components (its z component is 0)."""
+    dx, dy, dz = d
+    nx, ny, nz = normal
+    cos_i = dx * nx + dy * ny + dz * nz
+    orient = torch.where(cos_i < 0, -1.0, 1.0)
+    nx, ny, nz = nx * orient, ny * orient, nz * orient
     cos_i = cos_i * orient
-    v = n1.unsqueeze(-1) * dir
+    vx, vy, vz = n1 * dx, n1 * dy, n1 * dz
     if grating is not None:
-        v = v + grating
-    v_t = v - (v * nrm).sum(-1, keepdim=True) * nrm
-    d_t = v_t / n2.unsqueeze(-1)
-    cos2_out = 1.0 - (d_t * d_t).sum(-1)
+        vx, vy = vx + grating[0], vy + grating[1]
+    vn = vx * nx + vy * ny + vz * nz
+    tx, ty, tz = (vx - vn * nx) * inv_n2, (vy - vn * ny) * inv_n2, (vz - vn * nz) * inv_n2
+    cos2_out = 1.0 - (tx * tx + ty * ty + tz * tz)
     fail = cos2_out < 0
-    floor = torch.finfo(dir.dtype).eps
-    cos_out = torch.sqrt(torch.where(cos2_out > floor, cos2_out, torch.full_like(cos2_out, floor)))
-    dir_out = d_t + cos_out.unsqueeze(-1) * nrm
-    return dir_out, cos_i * cos_i, cos2_out, fail
+    floor = torch.finfo(cos2_out.dtype).eps
+    cos_out = torch.sqrt(torch.where(cos2_out > floor, cos2_out, floor))
+    return (tx + cos_out * nx, ty + cos_out * ny, tz + cos_out * nz), cos_i * cos_i, cos2_out, fail

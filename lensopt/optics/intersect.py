@@ -12,7 +12,7 @@ from torch import Tensor
 
 from lensopt.optics.surfaces import sag
 
-__all__ = ["intersect_quadric", "intersect_asphere", "NEWTON_ITERATIONS"]
+__all__ = ["intersect_quadric", "intersect_asphere", "quadric_xyz", "asphere_xyz", "Vec3", "NEWTON_ITERATIONS"]
 
 NEWTON_ITERATIONS = 12
 """Fixed iteration cap: Newton from the conic start converges in 3–5 steps in float64."""
@@ -21,7 +21,13 @@ NEWTON_ITERATIONS = 12
 def _safe_div(num: Tensor, den: Tensor) -> Tensor:
     """``num / den``, and 0 on rows where ``|den|`` is below machine epsilon (no inf, no NaN)."""
     ok = den.abs() > torch.finfo(den.dtype).eps
-    return torch.where(ok, num / torch.where(ok, den, torch.ones_like(den)), torch.zeros_like(num))
+    return torch.where(ok, num / torch.where(ok, den, 1.0), 0.0)
+
+
+Vec3 = tuple[Tensor, Tensor, Tensor]
+"""A vector field as its three components: the hot loop works on (x, y, z) tensors of shape (*)
+because fused kernels then vectorize over rays (see benchmarks/RESULTS.md, "Trace speed"); the
+public functions take and return ``(*, 3)`` tensors."""
 
 
 def intersect_quadric(pos: Tensor, dir: Tensor, c: Tensor, k: Tensor) -> tuple[Tensor, Tensor]:
@@ -43,20 +49,25 @@ def intersect_quadric(pos: Tensor, dir: Tensor, c: Tensor, k: Tensor) -> tuple[T
         t: (*) signed distance to the intersection, mm (0 where there is none).
         hit: (*) bool, False where the ray misses or meets the other branch of the conic.
     """
+    return quadric_xyz(pos.unbind(-1), dir.unbind(-1), c, k)
+
+
+def quadric_xyz(p: Vec3, d: Vec3, c: Tensor, k: Tensor) -> tuple[Tensor, Tensor]:
+    """``intersect_quadric`` on components (x, y, z) of shape (*)."""
     rho = 1.0 + k
+    px, py, pz = p
+    dx, dy, dz = d
     # Transfer to the vertex plane (skipped for rays parallel to it, which keep their start point).
-    t0 = _safe_div(-pos[..., 2], dir[..., 2])
-    px, py, pz = (pos + t0.unsqueeze(-1) * dir).unbind(-1)
-    pz = torch.where(t0 == 0, pz, torch.zeros_like(pz))  # exactly on the plane after a transfer
-    dx, dy, dz = dir.unbind(-1)
+    t0 = _safe_div(-pz, dz)
+    px, py = px + t0 * dx, py + t0 * dy
+    pz = torch.where(t0 == 0, pz, 0.0)  # exactly on the plane after a transfer
     a = c * (dx * dx + dy * dy + rho * dz * dz)
     b = dz - c * (px * dx + py * dy + rho * pz * dz)
     cc = c * (px * px + py * py + rho * pz * pz) - 2.0 * pz
     disc = b * b - a * cc
     hit = disc >= 0
-    root = torch.sqrt(torch.where(hit, disc, torch.zeros_like(disc)).clamp_min(torch.finfo(disc.dtype).tiny))
-    sign = torch.where(b >= 0, torch.ones_like(b), -torch.ones_like(b))
-    q = b + sign * root
+    root = torch.sqrt(torch.where(hit, disc, 0.0).clamp_min(torch.finfo(disc.dtype).tiny))
+    q = b + torch.where(b >= 0, root, -root)
     t = _safe_div(cc, q)
     hit = hit & (q.abs() > torch.finfo(q.dtype).eps)
     # The sag formula's branch satisfies (1 + κ) c z ≤ 1; the far side of a sphere/ellipsoid and the
@@ -69,7 +80,7 @@ def intersect_quadric(pos: Tensor, dir: Tensor, c: Tensor, k: Tensor) -> tuple[T
     other_ok = (a.abs() > torch.finfo(a.dtype).eps) & (rho * c * (pz + t_other * dz) <= 1.0)
     t = torch.where(hit & ~on_sheet & other_ok, t_other, t)
     hit = hit & (on_sheet | other_ok)
-    return torch.where(hit, t0 + t, torch.zeros_like(t)), hit
+    return torch.where(hit, t0 + t, 0.0), hit
 
 
 def intersect_asphere(
@@ -99,35 +110,40 @@ def intersect_asphere(
         defined: (*) bool, False where the sag is undefined at the last iterate (ray misses).
         converged: (*) bool, False where Newton did not reach the tolerance.
     """
-    p0, d0 = pos.detach(), dir.detach()
+    return asphere_xyz(pos.unbind(-1), dir.unbind(-1), c, k, asphere, iterations=iterations)
+
+
+def asphere_xyz(
+    p: Vec3, d: Vec3, c: Tensor, k: Tensor, asphere: Tensor, *, iterations: int = NEWTON_ITERATIONS
+) -> tuple[Tensor, Tensor, Tensor]:
+    """``intersect_asphere`` on components (x, y, z) of shape (*)."""
+    p0 = tuple(v.detach() for v in p)
+    d0 = tuple(v.detach() for v in d)
     c0, k0, a0 = c.detach(), k.detach(), asphere.detach()
     # Start from the conic (a good start: asphere terms are small near the vertex), else the plane.
-    t_conic, hit = intersect_quadric(p0, d0, c0, k0)
-    t_plane = _safe_div(-p0[..., 2], d0[..., 2])
-    t = torch.where(hit, t_conic, t_plane)
+    t_conic, hit = quadric_xyz(p0, d0, c0, k0)
+    t = torch.where(hit, t_conic, _safe_div(-p0[2], d0[2]))
     for _ in range(iterations):
         f, fp, _ = _residual(p0, d0, t, c0, k0, a0)
         t_next = t - _safe_div(f, fp)
         # A step that overflows (iterates running away on a pathological sag, float32) is not taken.
         t = torch.where(torch.isfinite(t_next), t_next, t)
     f, _, defined = _residual(p0, d0, t, c0, k0, a0)
-    scale = 1.0 + p0[..., :2].abs().amax(-1) + t.abs()
+    scale = 1.0 + torch.maximum(p0[0].abs(), p0[1].abs()) + t.abs()
     tol = 64.0 * torch.finfo(t.dtype).eps * scale
     converged = f.abs() <= tol  # False where f is not finite
     # Differentiable final step from the converged point. Rows that did not converge take it from
     # t = 0 (the ray's own, finite start) and return 0: no far-away iterate feeds inf or NaN into
     # values or gradients (0 · inf in a masked backward pass is NaN).
-    t = torch.where(converged, t, torch.zeros_like(t))
-    f, fp, _ = _residual(pos, dir, t, c, k, asphere)
+    t = torch.where(converged, t, 0.0)
+    f, fp, _ = _residual(p, d, t, c, k, asphere)
     t_final = t - _safe_div(f, fp)
-    return torch.where(converged, t_final, torch.zeros_like(t_final)), defined, converged
+    return torch.where(converged, t_final, 0.0), defined, converged
 
 
-def _residual(pos: Tensor, dir: Tensor, t: Tensor, c: Tensor, k: Tensor, asphere: Tensor):
+def _residual(p: Vec3, d: Vec3, t: Tensor, c: Tensor, k: Tensor, asphere: Tensor):
     """``f(t) = sag(r(t)) − z(t)``, ``f'(t)`` and whether the sag is defined at r(t)."""
-    x = pos + t.unsqueeze(-1) * dir
-    u = x[..., 0] ** 2 + x[..., 1] ** 2
-    z, dz_du, defined = sag(u, c, k, asphere)
-    f = z - x[..., 2]
-    fp = 2.0 * dz_du * (x[..., 0] * dir[..., 0] + x[..., 1] * dir[..., 1]) - dir[..., 2]
-    return f, fp, defined
+    x, y, z_ray = p[0] + t * d[0], p[1] + t * d[1], p[2] + t * d[2]
+    z, dz_du, defined = sag(x * x + y * y, c, k, asphere)
+    fp = 2.0 * dz_du * (x * d[0] + y * d[1]) - d[2]
+    return z - z_ray, fp, defined

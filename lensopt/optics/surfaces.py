@@ -15,7 +15,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-__all__ = ["sag", "phase_slope", "normal_from_slope", "sag_domain"]
+__all__ = ["sag", "phase_slope", "normal_from_slope", "normal_xyz", "conic_normal_xyz", "sag_domain"]
 
 
 def sag_domain(u: Tensor, c: Tensor, k: Tensor) -> Tensor:
@@ -48,7 +48,7 @@ def sag(u: Tensor, c: Tensor, k: Tensor, asphere: Tensor | None = None) -> tuple
     # The square root never sees an argument below machine epsilon, so neither values nor
     # gradients become NaN or infinite on undefined rows or exactly at an ellipsoid's rim.
     floor = torch.finfo(u.dtype).eps
-    root = torch.sqrt(torch.where(q > floor, q, torch.full_like(q, floor)))
+    root = torch.sqrt(torch.where(q > floor, q, floor))
     z = c * u / (1.0 + root)
     dz_du = c / (2.0 * root)
     if asphere is not None and asphere.shape[-1] > 0:
@@ -82,9 +82,25 @@ def normal_from_slope(xy: Tensor, dz_du: Tensor) -> Tensor:
     Returns:
         (*, 3) unit normals.
     """
-    g = -2.0 * dz_du.unsqueeze(-1) * xy
-    n = torch.cat([g, torch.ones_like(dz_du).unsqueeze(-1)], dim=-1)
-    return n / torch.linalg.vector_norm(n, dim=-1, keepdim=True)
+    return torch.stack(normal_xyz(xy[..., 0], xy[..., 1], dz_du), -1)
+
+
+def conic_normal_xyz(x: Tensor, y: Tensor, z: Tensor, c: Tensor, k: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    """Unit normal of the conic ``c(x² + y²) + c(1 + κ) z² − 2z = 0`` at a point on it, towards +z.
+
+    ``−∇F/2 = (−c x, −c y, 1 − (1 + κ) c z)``: no square root of the sag formula, finite at the rim
+    of an ellipsoid (where the slope form diverges), and already unit length on a sphere.
+    """
+    nx, ny, nz = -c * x, -c * y, 1.0 - (1.0 + k) * c * z
+    inv = torch.rsqrt(nx * nx + ny * ny + nz * nz)
+    return nx * inv, ny * inv, nz * inv
+
+
+def normal_xyz(x: Tensor, y: Tensor, dz_du: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    """``normal_from_slope`` on components: (nx, ny, nz) of shape (*) from x, y and dz/du."""
+    gx, gy = -2.0 * dz_du * x, -2.0 * dz_du * y
+    inv = torch.rsqrt(1.0 + gx * gx + gy * gy)
+    return gx * inv, gy * inv, inv
 
 
 def _even_polynomial(u: Tensor, coeffs: Tensor, first_power: int) -> tuple[Tensor, Tensor]:

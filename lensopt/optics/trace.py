@@ -15,10 +15,10 @@ from enum import IntEnum
 import torch
 from torch import Tensor
 
-from lensopt.optics.interact import bend
-from lensopt.optics.intersect import NEWTON_ITERATIONS, intersect_asphere, intersect_quadric
+from lensopt.optics.interact import bend_xyz
+from lensopt.optics.intersect import NEWTON_ITERATIONS, asphere_xyz, quadric_xyz
 from lensopt.optics.lens import Lens
-from lensopt.optics.surfaces import normal_from_slope, phase_slope, sag
+from lensopt.optics.surfaces import conic_normal_xyz, normal_xyz, phase_slope, sag
 
 __all__ = ["Status", "REASONS", "Rays", "SurfaceHit", "RayTrace", "trace", "failure_counts"]
 
@@ -134,79 +134,90 @@ def trace(
     """
     pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
     batch = pos.shape[:-1]
-    status = torch.zeros(batch, dtype=torch.int64, device=pos.device)
-    failed_at = torch.full(batch, -1, dtype=torch.int64, device=pos.device)
+    # Running mask + first failure code, kept in the rays' float dtype so that a fused kernel
+    # vectorizes every operation alike (integer lanes cost extra conversions); int64 on return.
+    ok = torch.ones(batch, dtype=torch.bool, device=pos.device)
+    status = torch.zeros(batch, dtype=pos.dtype, device=pos.device)
+    failed_at = torch.full(batch, -1.0, dtype=pos.dtype, device=pos.device)
     backtrack = torch.zeros(batch, dtype=torch.bool, device=pos.device)
     vertex = lens.vertex_z()
     lam_mm = lens.wavelength_um[rays.wavelength] * 1e-3
-    forward = torch.tensor([0.0, 0.0, 1.0], dtype=pos.dtype, device=pos.device).expand_as(pos)
+    inv_index = 1.0 / lens.index  # (S+1, W): one division per medium, not per ray and surface
+    # Components: fused kernels vectorize over rays only when x, y, z are separate tensors.
+    x, y, z = pos.unbind(-1)
+    dx, dy, dz = dir.unbind(-1)
     hits: list[SurfaceHit] = []
     last = lens.num_surfaces - 1 if upto is None else upto
     for s in range(last + 1):
         shape = lens.shapes[s]
         c, k = lens.curvature[s], lens.conic[s]
-        origin = torch.stack([torch.zeros_like(vertex[s]), torch.zeros_like(vertex[s]), vertex[s]])
-        local = pos - origin
+        lz = z - vertex[s]
         if shape.kind == "asphere":
-            t, defined, converged = intersect_asphere(local, dir, c, k, lens.asphere[s],
-                                                      iterations=newton_iterations)
-            missed, newton_failed = ~defined, ~converged
+            t, defined, converged = asphere_xyz((x, y, lz), (dx, dy, dz), c, k, lens.asphere[s],
+                                                iterations=newton_iterations)
+            status, ok = _fail(status, ok, ~defined, Status.MISSED)
+            status, ok = _fail(status, ok, ~converged, Status.NEWTON)
         else:
-            t, hit = intersect_quadric(local, dir, c, k)
-            missed, newton_failed = ~hit, torch.zeros_like(hit)
-        point = local + t.unsqueeze(-1) * dir
+            t, hit = quadric_xyz((x, y, lz), (dx, dy, dz), c, k)
+            status, ok = _fail(status, ok, ~hit, Status.MISSED)
         if s > 0:
-            backtrack = backtrack | ((t < 0) & (status == _OK))
-        status = _fail(status, missed, Status.MISSED)
-        status = _fail(status, newton_failed, Status.NEWTON)
-        u = point[..., 0] ** 2 + point[..., 1] ** 2
+            backtrack = backtrack | ((t < 0) & ok)
+        hx, hy, hz = x + t * dx, y + t * dy, lz + t * dz
+        u = hx * hx + hy * hy
         if shape.clip:
-            status = _fail(status, u > lens.semi_diameter[s] ** 2, Status.CLIPPED)
-        hit_pos = point + origin
-        failed_at = _first_failure(failed_at, status, s)
+            status, ok = _fail(status, ok, u > lens.semi_diameter[s] ** 2, Status.CLIPPED)
+        failed_at = _first_failure(failed_at, ok, s)
+        if shape.kind == "asphere":
+            _, dz_du, _ = sag(u, c, k, lens.asphere[s])
+            normal = normal_xyz(hx, hy, dz_du)
+        elif shape.kind == "conic":
+            normal = conic_normal_xyz(hx, hy, hz, c, k)
+        else:  # sphere or plane: (−cx, −cy, 1 − cz) is a unit vector on the surface, no normalisation
+            normal = (-c * hx, -c * hy, 1.0 - c * hz)
+        hz = hz + vertex[s]
         if upto is not None and s == upto:
-            ok = (status == _OK).unsqueeze(-1)
-            pos = torch.where(ok, hit_pos, pos)
+            x, y, z = torch.where(ok, hx, x), torch.where(ok, hy, y), torch.where(ok, hz, z)
             break
-        asph = lens.asphere[s] if shape.kind == "asphere" else None
-        _, dz_du, _ = sag(u, c, k, asph)
-        normal = normal_from_slope(point[..., :2], dz_du)
         grating = None
         if shape.diffractive:
             # m λ/(2π) ∇φ with ∇φ = 2 dφ/du (x, y, 0): finite at r = 0 (S16–S17).
             g = shape.order * lam_mm / math.pi * phase_slope(u, lens.phase[s])
-            grating = torch.cat([g.unsqueeze(-1) * point[..., :2], torch.zeros_like(g).unsqueeze(-1)], -1)
+            grating = (g * hx, g * hy)
         n1 = lens.index[s][rays.wavelength]
-        n2 = lens.index[s + 1][rays.wavelength]
-        dir_out, cos2_in, cos2_out, tir = bend(dir, normal, n1, n2, grating)
-        status = _fail(status, tir, Status.TIR)
-        failed_at = _first_failure(failed_at, status, s)
+        inv_n2 = inv_index[s + 1][rays.wavelength]
+        d_out, cos2_in, cos2_out, tir = bend_xyz((dx, dy, dz), normal, n1, inv_n2, grating)
+        status, ok = _fail(status, ok, tir, Status.TIR)
+        failed_at = _first_failure(failed_at, ok, s)
         if record:
-            hits.append(SurfaceHit(hit_pos, dir, dir_out, normal, t, cos2_in, cos2_out))
-        ok = (status == _OK).unsqueeze(-1)
-        pos = torch.where(ok, hit_pos, pos)
-        dir = torch.where(ok, dir_out, forward)
+            hits.append(SurfaceHit(torch.stack([hx, hy, hz], -1), torch.stack([dx, dy, dz], -1),
+                                   torch.stack(d_out, -1), torch.stack(normal, -1), t, cos2_in, cos2_out))
+        x, y, z = torch.where(ok, hx, x), torch.where(ok, hy, y), torch.where(ok, hz, z)
+        # Failed rays keep their last valid position and continue as placeholders along the axis.
+        dx, dy, dz = torch.where(ok, d_out[0], 0.0), torch.where(ok, d_out[1], 0.0), torch.where(ok, d_out[2], 1.0)
     else:
         # Flat image surface at the end of the last gap.
-        dz = dir[..., 2]
-        safe_dz = torch.where(dz.abs() > torch.finfo(dz.dtype).eps, dz, torch.ones_like(dz))
-        t = (vertex[-1] - pos[..., 2]) / safe_dz
-        status = _fail(status, dz.abs() <= torch.finfo(dz.dtype).eps, Status.MISSED)
-        failed_at = _first_failure(failed_at, status, lens.num_surfaces)
-        backtrack = backtrack | ((t < 0) & (status == _OK))
-        ok = (status == _OK).unsqueeze(-1)
-        pos = torch.where(ok, pos + t.unsqueeze(-1) * dir, pos)
-    return RayTrace(pos=pos, dir=dir, status=status, backtrack=backtrack, hits=tuple(hits), failed_at=failed_at)
+        eps = torch.finfo(dz.dtype).eps
+        parallel = dz.abs() <= eps
+        t = (vertex[-1] - z) / torch.where(parallel, 1.0, dz)
+        status, ok = _fail(status, ok, parallel, Status.MISSED)
+        failed_at = _first_failure(failed_at, ok, lens.num_surfaces)
+        backtrack = backtrack | ((t < 0) & ok)
+        x, y, z = torch.where(ok, x + t * dx, x), torch.where(ok, y + t * dy, y), torch.where(ok, z + t * dz, z)
+    return RayTrace(pos=torch.stack([x, y, z], -1), dir=torch.stack([dx, dy, dz], -1), status=status.long(),
+                    backtrack=backtrack, hits=tuple(hits), failed_at=failed_at.long())
 
 
-def _first_failure(failed_at: Tensor, status: Tensor, surface: int) -> Tensor:
+def _first_failure(failed_at: Tensor, ok: Tensor, surface: int) -> Tensor:
     """Record ``surface`` for rays that have failed by now and had no failure surface yet."""
-    return torch.where((status != _OK) & (failed_at < 0), torch.full_like(failed_at, surface), failed_at)
+    return torch.where(~ok & (failed_at < 0), float(surface), failed_at)
 
 
-def _fail(status: Tensor, failed: Tensor, reason: Status) -> Tensor:
-    """Record ``reason`` for rays that fail now and had not failed before."""
-    return torch.where((status == _OK) & failed, torch.full_like(status, int(reason)), status)
+def _fail(status: Tensor, ok: Tensor, failed: Tensor, reason: Status) -> tuple[Tensor, Tensor]:
+    """Record ``reason`` for rays that fail now and had not failed before; update the running mask."""
+    return torch.where(ok & failed, _CODE[reason], status), ok & ~failed
+
+
+_CODE = {reason: float(reason.value) for reason in Status}
 
 
 def failure_counts(result: RayTrace) -> dict[str, int]:
