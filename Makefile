@@ -30,7 +30,10 @@ demo: install
 	$(VENV)/bin/lensopt plot psf $(DEMO_SPEC) -o $(DEMO)_psf.png --pitch-um 2 --sqrt
 	$(VENV)/bin/lensopt simulate $(DEMO_SPEC) lensopt/imaging/data/coffee.png --region corner \
 		-o out/coffee_cooke_corner.png
-	@echo "demo outputs: $(DEMO)_trace.json $(DEMO)_layout.png $(DEMO)_fans.png $(DEMO)_spots.png $(DEMO)_psf.png out/coffee_cooke_corner.png"
+	$(VENV)/bin/lensopt plot field $(DEMO_SPEC) -o $(DEMO)_field.png
+	$(VENV)/bin/lensopt optimize specs/cooke_triplet_opt.toml -o out/cooke_triplet_opt.json --seed 0 --quiet
+	@echo "demo outputs: $(DEMO)_trace.json $(DEMO)_layout.png $(DEMO)_fans.png $(DEMO)_spots.png $(DEMO)_psf.png" \
+		"$(DEMO)_field.png out/coffee_cooke_corner.png out/cooke_triplet_opt.json"
 
 test: install
 	$(PY) -m pytest -q
