@@ -18,21 +18,21 @@ from torch import Tensor
 from lensopt.analysis.spot import spot_stats
 from lensopt.errors import LensoptError
 from lensopt.materials import design_catalog
-from lensopt.optics.bundle import Bundle, trace_bundle
-from lensopt.optics.lens import Lens
-from lensopt.optics.paraxial import first_order
-from lensopt.optics.sampling import PupilSampling
-from lensopt.optim import residuals as terms
-from lensopt.optim.glass import (
+from lensopt.materials.glass_space import (
     GlassMesh,
     GlassSpace,
     catalog_distance,
     glass_mesh,
     glass_space,
     mesh_distance,
-    schedule_weight,
 )
+from lensopt.optics.bundle import Bundle, trace_bundle
+from lensopt.optics.lens import Lens
+from lensopt.optics.paraxial import first_order
+from lensopt.optics.sampling import PupilSampling
+from lensopt.optim import residuals as terms
 from lensopt.optim.rays import head, with_rim
+from lensopt.optim.schedule import schedule_weight
 from lensopt.optim.solves import apply_solves, resolve_solves, solved_quantities
 from lensopt.optim.variables import Parameterization
 from lensopt.spec.models import LensSpec

@@ -26,8 +26,8 @@ from torch import Tensor
 
 from lensopt.errors import SpecError
 from lensopt.materials import CatalogGlass, ModelGlass, hartmann_index
+from lensopt.materials.glass_space import GlassSpace
 from lensopt.optics.lens import Lens
-from lensopt.optim.glass import GlassSpace
 from lensopt.spec.build import Model, build
 from lensopt.spec.models import DiffractiveSurface, LensSpec
 

@@ -11,7 +11,7 @@ from torch import Tensor
 
 from lensopt.errors import LensoptError
 from lensopt.materials import find_glass
-from lensopt.optim.glass import nearest_glass
+from lensopt.materials.glass_space import nearest_glass
 from lensopt.optim.problem import Problem
 from lensopt.spec.models import DiffractiveSurface, LensSpec, ModelGlassSpec
 

@@ -24,10 +24,10 @@ from scipy.spatial import Delaunay, cKDTree
 from torch import Tensor
 
 from lensopt.errors import LensoptError
-from lensopt.materials import DesignCatalog
+from lensopt.materials.catalog import DesignCatalog
 
 __all__ = ["GlassSpace", "GlassMesh", "glass_space", "glass_mesh", "mesh_distance", "catalog_distance",
-           "nearest_glass", "schedule_weight"]
+           "nearest_glass"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -184,16 +184,3 @@ def nearest_glass(g: Tensor, space: GlassSpace) -> list[int]:
     """Catalog index of the nearest glass to each row of g (G, d) (for binding)."""
     pts = space.points_tensor(g)
     return [int(i) for i in torch.cdist(g.detach(), pts).argmin(-1)]
-
-
-def schedule_weight(schedule: list[tuple[float, float]], fraction: float) -> float:
-    """Piecewise exponential schedule: log-linear between knots (fraction, weight), flat outside."""
-    if fraction <= schedule[0][0]:
-        return schedule[0][1]
-    for (f0, w0), (f1, w1) in zip(schedule, schedule[1:], strict=False):
-        if fraction <= f1:
-            if f1 == f0:
-                return w1
-            u = (fraction - f0) / (f1 - f0)
-            return float(w0 * (w1 / w0) ** u)
-    return schedule[-1][1]

@@ -1,5 +1,5 @@
 """Glass variables: whitening (S30), pruned Delaunay mesh and its distance (S55), catalog distance
-(S56), the piecewise exponential schedule."""
+(S56)."""
 
 from __future__ import annotations
 
@@ -12,14 +12,13 @@ from scipy.optimize import minimize
 
 from lensopt.materials import design_catalog
 from lensopt.materials.catalog import _design
-from lensopt.optim.glass import (
+from lensopt.materials.glass_space import (
     GlassSpace,
     catalog_distance,
     glass_mesh,
     glass_space,
     mesh_distance,
     nearest_glass,
-    schedule_weight,
 )
 
 
@@ -120,26 +119,3 @@ def test_catalog_distance_and_nearest() -> None:
     brute = np.min(np.linalg.norm(g.numpy()[:, None] - sp.points[None], axis=-1), axis=1)
     np.testing.assert_allclose(d.numpy(), brute, rtol=1e-12)
     assert nearest_glass(g, sp) == [3, 7]
-
-
-def test_piecewise_exponential_schedule() -> None:
-    knots = [(0.0, 1e-4), (0.5, 1e-2), (0.8, 1.0)]
-    assert schedule_weight(knots, 0.0) == pytest.approx(1e-4)
-    assert schedule_weight(knots, 0.25) == pytest.approx(1e-3)  # geometric midpoint
-    assert schedule_weight(knots, 0.65) == pytest.approx(1e-1)
-    assert schedule_weight(knots, 1.0) == 1.0
-
-
-def test_group_weight_schedules_scale_their_rows(make_cooke) -> None:  # noqa: ANN001
-    from lensopt.optim import Problem
-    from lensopt.spec import parse_spec
-
-    data = make_cooke(constraints={"ray_angle": {"weight": 2.0, "schedule": [[0.5, 0.01], [0.75, 1.0]]}})
-    data["surfaces"][0]["vary"] = ["radius"]
-    p = Problem(parse_spec(data))
-    rows = p.slices["ray_angle"]
-    assert float(p.row_scale(0.2)[rows][0]) == pytest.approx(0.01)
-    assert float(p.row_scale(0.625)[rows][0]) == pytest.approx(0.1)  # geometric midpoint
-    assert float(p.row_scale(0.9)[rows][0]) == 1.0
-    assert float(p.row_scale(0.2)[p.slices["tra"]].max()) == 1.0
-    assert not p.schedules_settled(0.6) and p.schedules_settled(0.8)
