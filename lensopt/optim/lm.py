@@ -15,6 +15,8 @@ Parameter evaporation (S2.3.2): besides the running-max D, columns of J whose no
 ``DEAD_COLUMN`` times the largest one are treated as exactly zero (their step is then exactly 0). Such
 columns carry only round-off (a variable the merit does not see, e.g. the radius of a surface between
 two identical media); with D at its floor ε even that noise would otherwise drive long random steps.
+A column with a non-finite entry is treated the same way; non-finite residuals are refused. λ is
+capped at ``MAX_DAMPING`` so that running on past the stopping rules never overflows it.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from lensopt.spec.optim import LMSpec
 __all__ = ["Trial", "StepInfo", "LevenbergMarquardt", "damped_step"]
 
 MIN_DAMPING = 1e-15
+MAX_DAMPING = 1e100
 DEAD_COLUMN = 1e-9
 
 
@@ -125,7 +128,12 @@ class LevenbergMarquardt:
         s = self.settings
         self._ensure_jacobian(scale)
         J, r = scale[:, None] * self._J, scale * self._r
+        if not bool(torch.isfinite(r).all()):
+            return self._reject(float("inf"), "non-finite residuals")
+        # A column with a non-finite entry (a derivative that could not be evaluated) counts as dead:
+        # that variable does not move in this step.
         col = torch.linalg.vector_norm(J, dim=0)
+        col = torch.where(torch.isfinite(col), col, torch.zeros_like(col))
         J = torch.where(col > DEAD_COLUMN * col.max(), J, torch.zeros_like(J))
         merit = 0.5 * float((r**2).sum())
         delta = damped_step(J, r, self.D, self.damping)
@@ -139,7 +147,7 @@ class LevenbergMarquardt:
         if new < merit:
             self.damping = max(self.damping / s.decrease, MIN_DAMPING)
         else:
-            self.damping *= s.increase
+            self.damping = min(self.damping * s.increase, MAX_DAMPING)
         if not accept:
             self.rejected += 1
             self.history.append(merit)
@@ -151,7 +159,7 @@ class LevenbergMarquardt:
         return StepInfo(True, new, self.damping, "")
 
     def _reject(self, merit: float, reason: str) -> StepInfo:
-        self.damping *= self.settings.increase
+        self.damping = min(self.damping * self.settings.increase, MAX_DAMPING)
         self.rejected += 1
         self.history.append(merit)
         return StepInfo(False, merit, self.damping, reason)

@@ -3,6 +3,8 @@ rejection, and convergence on a closed-form problem."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -127,3 +129,30 @@ def test_stopping_rules() -> None:
     assert reason is not None
     lm.damping = 1e13
     assert lm.stop_reason().startswith("damping")
+
+
+def test_steps_past_convergence_stay_finite() -> None:
+    # Run on after the stopping rules would end it (as a wall-time benchmark does): at the minimum
+    # every step is refused and λ grows by IF each time. λ is capped instead of overflowing to inf
+    # (√inf · I in the augmented system would make LAPACK refuse it), and θ stays at the minimum.
+    lm = _lm(_rosenbrock, [-1.2, 1.0])
+    one = torch.ones(2, dtype=torch.float64)
+    for _ in range(1200):  # 2^1200 would overflow a float
+        info = lm.step(one)
+        assert math.isfinite(info.damping) and math.isfinite(info.merit)
+    torch.testing.assert_close(lm.theta, torch.tensor([1.0, 1.0], dtype=torch.float64))
+
+
+def test_a_non_finite_jacobian_column_does_not_move_its_variable() -> None:
+    # A NaN derivative (e.g. from a lens on the edge of failing) is not solved with: its variable
+    # stays put this step, the other one moves, and everything stays finite.
+    def jac(t: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        J = torch.func.jacfwd(_rosenbrock)(t)
+        J[0, 0] = float("nan")
+        return J, _rosenbrock(t)
+
+    lm = LevenbergMarquardt(torch.tensor([-1.2, 1.0], dtype=torch.float64), jac,
+                            lambda t: Trial(_rosenbrock(t), True), LMSpec())
+    info = lm.step(torch.ones(2, dtype=torch.float64))
+    assert info.accepted and math.isfinite(info.merit)
+    assert float(lm.theta[0]) == -1.2 and float(lm.theta[1]) != 1.0
