@@ -54,6 +54,13 @@ def run(p: Problem, method: str, budget_s: float, lr: float | None = None) -> li
     return trace
 
 
+def thin(trace: list[tuple[float, float]], points: int = 400) -> list[list[float]]:
+    """At most ~``points`` (wall s, merit) pairs: every k-th step and the last, rounded for the record."""
+    k = max(1, len(trace) // points)
+    kept = trace[::k] + ([trace[-1]] if (len(trace) - 1) % k else [])
+    return [[round(t, 3), float(f"{m:.6e}")] for t, m in kept]
+
+
 def at(trace: list[tuple[float, float]], t: float) -> float:
     return min(m for s, m in trace if s <= t)
 
@@ -85,7 +92,7 @@ def main() -> None:
         write_text_atomic(args.json, json.dumps({
             "problem": args.problem, "variables": p.num_variables, "residuals": p.size, "budget_s": args.budget,
             "loadavg_before": load_before, "loadavg_after": os.getloadavg(), "threads": torch.get_num_threads(),
-            "runs": {k: v for k, v in runs.items()}}, indent=1) + "\n")
+            "runs": {k: thin(v) for k, v in runs.items()}}) + "\n")
     if args.plot:
         import matplotlib
 
