@@ -10,7 +10,8 @@ points, started on the plane z = −5 mm before surface 1) to the image plane, C
 - ``sketch``: ``benchmarks/soa_sketch.py``, a compiled component-wise sphere + Snell loop — not
   lensopt, the ceiling a component-wise formulation of the trace would reach (``--no-ceiling``).
 
-Repeats are interleaved (every repeat runs every configuration once, in a rotating order) so all
+lensopt gets the rays stored component-major (``component_major_rays``), as optiland's ``RealRays``
+store them. Repeats are interleaved (every repeat runs every configuration once, in a rotating order) so all
 see the same machine load; the table gives medians and ratios to optiland's median in this run.
 Compilation / JIT warm-up is excluded from the timings and reported separately.
 
@@ -36,7 +37,7 @@ import numpy as np
 import torch
 from soa_sketch import sketch_runner
 
-from lensopt.optics.compiled import compiled_trace
+from lensopt.optics.compiled import compiled_trace, component_major_rays
 from lensopt.optics.trace import Rays, trace
 from lensopt.spec import build, load_spec
 
@@ -112,7 +113,8 @@ class Peer:
 
 def lensopt_runner(model, rays: Rays, dtype: torch.dtype, compiled: bool) -> Callable[[], object]:
     lens = model.lens.to(dtype)
-    r = Rays(pos=rays.pos.to(dtype), dir=rays.dir.to(dtype), wavelength=rays.wavelength)
+    # Component-major storage, as optiland's RealRays keep x, y, z (and L, M, N) as separate arrays.
+    r = component_major_rays(Rays(pos=rays.pos.to(dtype), dir=rays.dir.to(dtype), wavelength=rays.wavelength))
     if compiled:
         return lambda: compiled_trace(lens, r, fallback=False)
     return lambda: trace(lens, r)

@@ -6,10 +6,11 @@ into one C++ kernel (DESIGN.md "Speed": eager torch is memory-bound, every op wr
 ``compiled_trace`` is a drop-in for ``trace``: same arguments, same ``RayTrace``, same numbers (to
 rounding: Inductor may contract ``a*b + c`` and reorder sums), differentiable.
 
-What it buys on CPU today (benchmarks/RESULTS.md): ~3× eager in float64, float32 another ~1.6×,
-at ~1.9× eager's peak memory (Inductor keeps every per-surface intermediate alive
-for the one fused kernel). The ``[..., 3]`` vectors keep Inductor from vectorizing over rays; a
-component-wise formulation reaches ~20× more (see benchmarks/soa_sketch.py).
+What it buys on CPU today (benchmarks/RESULTS.md, Cooke triplet, 1e6 rays, one thread): 7× eager
+in float64 (3.7× optiland's tracer), another 4× in float32, with peak memory only that of the
+outputs. The whole surface loop is one fused SIMD loop over the rays: the trace internals are
+component-wise, rays are read component-major, and Inductor's fusion-size limit is raised so that it
+does not split the loop into several kernels joined by ray-sized buffers.
 
 One compiled function is cached per lens *structure* (surface kinds, stop, ``upto``, ``record``,
 Newton cap, dtype, device). Changing tensor values (an optimizer step) reuses it; changing the
@@ -36,7 +37,7 @@ from lensopt.optics.intersect import NEWTON_ITERATIONS
 from lensopt.optics.lens import Lens, SurfaceShape
 from lensopt.optics.trace import Rays, RayTrace, SurfaceHit, trace
 
-__all__ = ["compiled_trace", "clear_compiled_cache"]
+__all__ = ["compiled_trace", "component_major_rays", "clear_compiled_cache"]
 
 logger = logging.getLogger(__name__)
 
@@ -79,7 +80,8 @@ def compiled_trace(
     args = [getattr(lens, name) for name in _LENS_TENSORS]
     # Component-major copies (x of every ray, then y, then z): the fused kernel then loads each
     # component contiguously and vectorizes over rays; from the interleaved (*B, 3) layout Inductor
-    # falls back to scalar loops (about 2× slower, benchmarks/RESULTS.md).
+    # falls back to scalar loops (about 2× slower). Rays made component-major by the caller
+    # (``component_major_rays``) skip the copy, ~20 % of a call at 1e6 rays.
     pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
     args += [_component_major(pos), _component_major(dir), rays.wavelength]
     if isinstance(fn, str):
@@ -95,14 +97,22 @@ def compiled_trace(
         logger.warning("torch.compile of the trace failed (%s: %s); using the eager trace",
                        type(err).__name__, str(err).splitlines()[0] if str(err) else "")
         return result
-    pos, dir, status, backtrack, hits = out
+    pos, dir, status, backtrack, hits, failed_at = out
     return RayTrace(pos=pos, dir=dir, status=status, backtrack=backtrack,
-                    hits=tuple(SurfaceHit(*h) for h in hits))
+                    hits=tuple(SurfaceHit(*h) for h in hits), failed_at=failed_at)
 
 
 def _component_major(v: Tensor) -> Tensor:
-    """The same (*B, 3) values stored as three contiguous (*B) planes."""
-    return v.movedim(-1, 0).contiguous().movedim(0, -1)
+    """The same (*B, 3) values stored as three contiguous (*B) planes (no copy when they already are)."""
+    planes = v.movedim(-1, 0)
+    return v if planes.is_contiguous() else planes.contiguous().movedim(0, -1)
+
+
+def component_major_rays(rays: Rays) -> Rays:
+    """The same rays with positions and directions stored component-major (x of every ray, then y,
+    then z; still (*B, 3) tensors): the layout ``compiled_trace`` (and the eager trace) read fastest."""
+    pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
+    return Rays(_component_major(pos), _component_major(dir), rays.wavelength)
 
 
 def clear_compiled_cache() -> None:
@@ -118,14 +128,14 @@ def _make_compiled(key: _Key) -> Callable[..., Any]:
         curvature: Tensor, conic: Tensor, asphere: Tensor, phase: Tensor, thickness: Tensor,
         index: Tensor, wavelength_um: Tensor, semi_diameter: Tensor,
         pos: Tensor, dir: Tensor, wavelength: Tensor,
-    ) -> tuple[Tensor, Tensor, Tensor, Tensor, tuple[tuple[Tensor, ...], ...]]:
+    ) -> tuple[Tensor, Tensor, Tensor, Tensor, tuple[tuple[Tensor, ...], ...], Tensor | None]:
         lens = Lens(shapes=shapes, curvature=curvature, conic=conic, asphere=asphere, phase=phase,
                     thickness=thickness, index=index, wavelength_um=wavelength_um,
                     semi_diameter=semi_diameter, stop=stop)
         r = trace(lens, Rays(pos, dir, wavelength), upto=upto, record=record,
                   newton_iterations=newton_iterations)
         hits = tuple((h.pos, h.dir_in, h.dir_out, h.normal, h.t, h.cos2_in, h.cos2_out) for h in r.hits)
-        return r.pos, r.dir, r.status, r.backtrack, hits
+        return r.pos, r.dir, r.status, r.backtrack, hits, r.failed_at
 
     # Dynamo keeps its compiled-code cache (and recompile limit) per code object; a copy of the
     # code per structure keeps structures from evicting each other.

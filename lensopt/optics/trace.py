@@ -95,7 +95,7 @@ class RayTrace:
         backtrack: (*B) bool, True where some ray-marching distance was negative.
         hits: per-surface records when traced with ``record=True``, else empty.
         failed_at: (*B) int64 index of the surface where the ray failed (S = the image surface),
-            −1 for rays that reached the end; None when not recorded.
+            −1 for rays that reached the end; with ``record=True`` only, else None.
     """
 
     pos: Tensor
@@ -138,7 +138,7 @@ def trace(
     # vectorizes every operation alike (integer lanes cost extra conversions); int64 on return.
     ok = torch.ones(batch, dtype=torch.bool, device=pos.device)
     status = torch.zeros(batch, dtype=pos.dtype, device=pos.device)
-    failed_at = torch.full(batch, -1.0, dtype=pos.dtype, device=pos.device)
+    failed_at = torch.full(batch, -1.0, dtype=pos.dtype, device=pos.device) if record else None
     backtrack = torch.zeros(batch, dtype=torch.bool, device=pos.device)
     vertex = lens.vertex_z()
     lam_mm = lens.wavelength_um[rays.wavelength] * 1e-3
@@ -204,11 +204,15 @@ def trace(
         backtrack = backtrack | ((t < 0) & ok)
         x, y, z = torch.where(ok, x + t * dx, x), torch.where(ok, y + t * dy, y), torch.where(ok, z + t * dz, z)
     return RayTrace(pos=torch.stack([x, y, z], -1), dir=torch.stack([dx, dy, dz], -1), status=status.long(),
-                    backtrack=backtrack, hits=tuple(hits), failed_at=failed_at.long())
+                    backtrack=backtrack, hits=tuple(hits),
+                    failed_at=None if failed_at is None else failed_at.long())
 
 
-def _first_failure(failed_at: Tensor, ok: Tensor, surface: int) -> Tensor:
-    """Record ``surface`` for rays that have failed by now and had no failure surface yet."""
+def _first_failure(failed_at: Tensor | None, ok: Tensor, surface: int) -> Tensor | None:
+    """Record ``surface`` for rays that have failed by now and had no failure surface yet (when
+    recording; the plain trace skips the bookkeeping)."""
+    if failed_at is None:
+        return None
     return torch.where(~ok & (failed_at < 0), float(surface), failed_at)
 
 

@@ -99,3 +99,34 @@ def test_falls_back_to_eager_when_compilation_fails(monkeypatch, caplog) -> None
     with pytest.raises(RuntimeError, match="no C\\+\\+ compiler"):
         clear_compiled_cache()
         compiled_trace(lens, rays, fallback=False)
+
+
+def test_component_major_rays_keep_their_values_and_skip_the_copy() -> None:
+    from lensopt.optics.compiled import _component_major, component_major_rays
+
+    g = torch.Generator().manual_seed(1)
+    pos = torch.randn(5, 7, 3, generator=g, dtype=torch.float64)
+    d = torch.nn.functional.normalize(torch.randn(5, 7, 3, generator=g, dtype=torch.float64) + torch.tensor(
+        [0.0, 0.0, 4.0], dtype=torch.float64), dim=-1)
+    rays = Rays(pos, d, torch.zeros(5, 7, dtype=torch.long))
+    cm = component_major_rays(rays)
+    assert torch.equal(cm.pos, pos) and torch.equal(cm.dir, d)
+    assert cm.pos.movedim(-1, 0).is_contiguous() and not pos.movedim(-1, 0).is_contiguous()
+    assert _component_major(cm.pos) is cm.pos  # already component-major: no copy
+
+
+def test_compiled_record_keeps_the_hits_and_failure_surfaces() -> None:
+    # record=True (what the optimizer's constraints and failure margins read): per-surface hits and
+    # the surface where each ray failed, as eager.
+    lens = build(parse_spec(MIXED)).lens
+    rays = _rays(200)
+    eager = trace(lens, rays, record=True)
+    comp = compiled_trace(lens, rays, record=True, fallback=False)
+    assert torch.equal(comp.failed_at, eager.failed_at)
+    assert bool((eager.failed_at >= 0).any()) and bool((eager.failed_at < 0).any())
+    assert len(comp.hits) == len(eager.hits) == lens.num_surfaces
+    for h_c, h_e in zip(comp.hits, eager.hits, strict=True):
+        ok = eager.valid
+        assert (h_c.pos[ok] - h_e.pos[ok]).abs().max() <= 1e-12
+        assert (h_c.cos2_out[ok] - h_e.cos2_out[ok]).abs().max() <= 1e-12
+    assert trace(lens, rays).failed_at is None  # the plain trace skips the bookkeeping
