@@ -65,6 +65,8 @@ def main() -> None:
     ap.add_argument("--grid", type=int, default=1001)
     ap.add_argument("--aim-steps", type=int, default=3)
     args = ap.parse_args()
+    if "front_aperture" not in tomllib.loads(Path(args.spec).read_text())["system"]:
+        ap.error(f"{args.spec} has no system.front_aperture: nothing to compare")
     for aim in ("none", "full"):
         half = 1.0 if aim == "none" else 1.3
         t0 = time.perf_counter()
