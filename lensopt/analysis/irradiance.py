@@ -65,12 +65,14 @@ def relative_illumination_flux(
     margin: float = 1.25,
     d_rel: float = 1e-3,
     aim_steps: int = 3,
+    max_rays: int = 2_000_000,
 ) -> FluxIllumination:
     """Relative illumination by counting passing rays on a ``grid`` × ``grid`` pupil grid per field.
 
     The grid is centred on the fully aimed pupil of each field and spans ``margin`` times its larger
     semi-axis (``edge_hits`` tells whether that held the whole beam). y'(ρ) is differentiated by
-    central differences at fields ±``d_rel``·HFOV (one-sided on axis).
+    central differences at fields ±``d_rel``·HFOV (one-sided on axis). The grid is traced in tiles
+    of at most ``max_rays`` rays (fields × wavelengths × points), so memory stays bounded.
     """
     if system.object_distance is not None or system.field_type != "angle":
         raise LensoptError("the flux estimate needs an object at infinity and an angle field", path="system")
@@ -108,16 +110,24 @@ def relative_illumination_flux(
             half = margin * torch.maximum(a_all[sel][mid], b_all[sel][mid]).max().clamp_min(1.0)
             centre = y_all[sel][mid].mean()
             pupil = torch.stack([unit[:, 0] * half, centre + unit[:, 1] * half], -1)
-            rays = launch(clipped, system, pupil.expand(len(g), num_w, *pupil.shape), tan,
-                          epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z)
-            res = trace(clipped, rays)
-            ok = res.valid
-            if system.front_aperture is not None:
-                fa = system.front_aperture
-                pos, dirs = torch.broadcast_tensors(rays.pos, rays.dir)
-                ok = ok & ~outside_front_aperture(pos, dirs, fa.distance, fa.diameter)
-            count = ok.sum(-1).to(dtype)  # (2 or 3, W)
-            y = torch.where(ok, res.pos[..., 1], 0.0).sum(-1) / count.clamp_min(1.0)
+            count = torch.zeros(len(g), num_w, dtype=dtype, device=device)
+            y_sum = torch.zeros_like(count)
+            edge = torch.zeros((), dtype=torch.long, device=device)
+            tile = max(1, max_rays // (len(g) * num_w))
+            for lo in range(0, pupil.shape[0], tile):
+                part = pupil[lo:lo + tile]
+                rays = launch(clipped, system, part.expand(len(g), num_w, *part.shape), tan,
+                              epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z)
+                res = trace(clipped, rays)
+                ok = res.valid
+                if system.front_aperture is not None:
+                    fa = system.front_aperture
+                    pos, dirs = torch.broadcast_tensors(rays.pos, rays.dir)
+                    ok = ok & ~outside_front_aperture(pos, dirs, fa.distance, fa.diameter)
+                count = count + ok.sum(-1).to(dtype)  # (2 or 3, W)
+                y_sum = y_sum + torch.where(ok, res.pos[..., 1], 0.0).sum(-1)
+                edge = edge + (ok[mid] & border[lo:lo + tile]).sum()
+            y = y_sum / count.clamp_min(1.0)
             rho = torch.sin(torch.atan(tan))[:, None]
             if mid == 0:
                 jac = (y[1] / rho[1]) ** 2
@@ -127,7 +137,7 @@ def relative_illumination_flux(
             areas.append(count[mid] * cell)
             cents.append(y[mid])
             jacs.append(jac)
-            edges.append((ok[mid] & border).sum())
+            edges.append(edge)
         area, cent, jac = torch.stack(areas), torch.stack(cents), torch.stack(jacs)
         w = system.wavelength_weights.to(dtype)
         irr = (w * area / jac.abs().clamp_min(torch.finfo(dtype).tiny)).sum(-1)
