@@ -26,6 +26,7 @@ import dataclasses
 import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import pytest
 import torch
@@ -127,48 +128,15 @@ thickness = 43.0
 stop = true
 """
 
-HYBRID = """
-name = "hybrid triplet: asphere, stop inside, diffractive on a conic base"
-[system]
-aperture = { epd = 8.0 }
-field = { hfov_deg = 15.0, relative = [1.0] }
-aim = "chief"
-[spectrum]
-wavelengths_nm = [486.1, 587.6, 656.3]
-reference_nm = 587.6
-[[surfaces]]
-type = "asphere"
-radius = 22.0
-conic = -0.4
-coefficients = { 4 = -3.0e-6, 6 = 2.0e-8 }
-thickness = 3.2
-material = { nd = 1.62, vd = 60.3 }
-[[surfaces]]
-type = "sphere"
-radius = -400.0
-thickness = 6.0
-[[surfaces]]
-type = "sphere"
-radius = -22.0
-thickness = 1.0
-material = "F2"
-stop = true
-[[surfaces]]
-type = "sphere"
-radius = 20.0
-thickness = 4.8
-[[surfaces]]
-type = "diffractive"
-base = { type = "conic", radius = 80.0, conic = -1.5 }
-phase = { 2 = -4.0, 4 = 0.01 }
-design_wavelength_nm = 587.6
-thickness = 3.0
-material = { nd = 1.62, vd = 60.3 }
-[[surfaces]]
-type = "sphere"
-radius = -18.5
-thickness = 42.0
-"""
+HYBRID = Path(__file__).resolve().parents[1] / "data" / "hybrid_triplet.toml"
+
+
+def hybrid_chief_full_field() -> Model:
+    """The shared hybrid test lens at full field only, chief-ray aimed."""
+    data = tomllib.loads(HYBRID.read_text())
+    data["system"]["field"]["relative"] = [1.0]
+    data["system"]["aim"] = "chief"
+    return build(parse_spec(data), dtype=D)
 
 
 def load(text: str) -> Model:
@@ -329,7 +297,7 @@ def test_tra_jacobian_forward_reverse_and_finite_differences(name: str) -> None:
 
 
 def test_tra_jacobian_through_chief_aiming_newton_and_diffractive_paths() -> None:
-    model = load(HYBRID)
+    model = hybrid_chief_full_field()
     assert model.system.aim == "chief"
     shapes = model.lens.shapes
     assert shapes[0].kind == "asphere" and shapes[4].diffractive and model.lens.stop == 2
