@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
+from procmem import peak_rss_mb
 
 from lensopt.imaging.commands import parse_grid
 from lensopt.imaging.plan import PlanOptions, parse_effects
@@ -22,14 +22,6 @@ from lensopt.imaging.simulate import plan_scene, run_plan
 from lensopt.spec import build, load_spec
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def peak_rss_mb() -> float:
-    """Peak resident set of this process (VmHWM; unlike ru_maxrss it does not inherit the parent's peak)."""
-    for line in open("/proc/self/status"):
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) / 1024
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def main() -> None:

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import sys
 import time
 import types
@@ -29,14 +28,7 @@ sys.modules["torchvision"].utils = sys.modules["torchvision.utils"]  # type: ign
 
 from deeplens import GeoLens  # noqa: E402
 from deeplens.imgsim import conv_psf_map  # noqa: E402
-
-
-def peak_rss_mb() -> float:
-    """Peak resident set of this process (VmHWM; unlike ru_maxrss it does not inherit the parent's peak)."""
-    for line in open("/proc/self/status"):
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) / 1024
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+from procmem import peak_rss_mb  # noqa: E402
 
 
 def main() -> None:

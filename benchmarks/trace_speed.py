@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from procmem import vm_kb
 from soa_sketch import sketch_runner
 
 from lensopt.optics.compiled import compiled_trace, component_major_rays
@@ -129,14 +130,6 @@ def timed(fn: Callable[[], object], prepare: Callable[[], None] | None = None) -
     return time.perf_counter() - t0, out
 
 
-def _vm_kb(field: str) -> int:
-    """A ``VmRSS``/``VmHWM`` line of /proc/self/status, kB."""
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith(field + ":"):
-            return int(line.split()[1])
-    raise RuntimeError(f"{field} not in /proc/self/status")
-
-
 def child_main(task: str, mode: str, dtype: str, n: int) -> None:
     """Run in a fresh process: ``memory`` prints the peak RSS growth of one call (MB); ``kernels``
     prints the per-kernel profile of the compiled trace."""
@@ -149,9 +142,9 @@ def child_main(task: str, mode: str, dtype: str, n: int) -> None:
     # Peak RSS of the process during the call minus RSS before it: /proc/self/clear_refs "5" resets
     # VmHWM; the parent sets MALLOC_MMAP_THRESHOLD_ so every array is returned to the OS when freed.
     Path("/proc/self/clear_refs").write_text("5")
-    before = _vm_kb("VmRSS")
+    before = vm_kb("VmRSS")
     timed(fn)
-    print(f"{(_vm_kb('VmHWM') - before) / 1024:.0f}")
+    print(f"{(vm_kb('VmHWM') - before) / 1024:.0f}")
 
 
 def run_child(task: str, mode: str, dtype: str, n: int) -> str:
