@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 TORCH_PIN := torch==2.13.0
 
-.PHONY: install demo test test-external lint clean
+.PHONY: install demo test test-slow test-external lint clean
 
 install: $(STAMP)
 
@@ -37,6 +37,10 @@ demo: install
 
 test: install
 	$(PY) -m pytest -q
+
+# Long studies and multi-process checks, deselected from `make test` by the `slow` marker.
+test-slow: install
+	$(PY) -m pytest -q -m slow
 
 # Optional: lensopt's CODE V export read back by rayoptics (Python >= 3.12, large install, no torch),
 # in its own venv. Set PY312 to a Python 3.12+ interpreter if python3.12 is not on the PATH.
