@@ -24,13 +24,14 @@ from lensopt.optics.lens import Lens
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling
 from lensopt.optim import residuals
+from lensopt.optim.image_objective import ImageObjective
 from lensopt.optim.rays import head, with_rim
 from lensopt.optim.schedule import schedule_weight
 from lensopt.optim.solves import apply_solves, resolve_solves, solved_quantities
 from lensopt.optim.terms import TERMS, TermContext
 from lensopt.optim.variables import Parameterization
 from lensopt.spec.models import LensSpec
-from lensopt.spec.optim import OptimizeSpec
+from lensopt.spec.optim import ImageSpec, OptimizeSpec
 
 __all__ = ["Evaluation", "Problem"]
 
@@ -62,9 +63,11 @@ class Problem:
         dtype: float64 for design work.
     """
 
-    def __init__(self, spec: LensSpec, *, seed: int = 0, dtype: torch.dtype = torch.float64) -> None:
+    def __init__(self, spec: LensSpec, *, seed: int = 0, dtype: torch.dtype = torch.float64,
+                 method: str | None = None, image_dtype: torch.dtype = torch.float32) -> None:
         self.opt: OptimizeSpec = spec.optimize or OptimizeSpec()
-        self.objective: str = getattr(self.opt, "objective", "spot")
+        self.objective: str = self.opt.objective
+        self.image: ImageObjective | None = None
         self.seed = seed
         self.dtype = dtype
         self.solves = resolve_solves(spec)
@@ -107,6 +110,10 @@ class Problem:
         ]
         self.failure_penalty = cons.ray_failure.penalty_mm or alpha
         self.theta0 = self.param.initial()
+        if self.objective == "raw":
+            mode = "scalar" if (method or self.opt.optimizer) == "adam" else "gtra"
+            self.image = ImageObjective(self.spec, self.system, self.opt.image or ImageSpec(), mode=mode,
+                                        dtype=image_dtype)
         self.slices = self._layout()
         self.size = max((sl.stop for sl in self.slices.values()), default=0)
 
@@ -283,6 +290,13 @@ class Problem:
         if scale is not None:
             r = r * scale
         return {name: 0.5 * float((r[sl] ** 2).sum()) for name, sl in self.slices.items()}
+
+    def spot_esr_mm(self, theta: Tensor) -> float:
+        """Effective spot radius of the optimization rays' spot sample at θ (a trace; any objective)."""
+        with torch.no_grad():
+            lens, _ = self.lens(theta)
+            spot = head(self.bundle(lens), self.num_spot)
+            return float(spot_stats(spot, self.system.wavelength_weights, self.field_weights).effective_radius)
 
     def esr_mm(self, r: Tensor) -> float:
         """Effective spot radius of the optimization rays from the TRA rows (‖ℓ_TRA‖/w_TRA)."""
