@@ -110,6 +110,7 @@ class ImageObjective:
         self.images: Tensor | None = None
         self.regions: list[Region] = []
         self.target: GtraTarget | None = None
+        self._held_out: dict[int, tuple[Tensor, list[Region]]] = {}
         self.set_batch(0)
 
     # ------------------------------------------------------------------------------------ batches
@@ -184,13 +185,15 @@ class ImageObjective:
         return torch.sqrt(2.0 * self.loss(lens).to(lens.dtype)).reshape(1)
 
     def held_out_psnr(self, lens: Lens, count: int | None = None) -> float:
-        """PSNR (dB) of the captures of ``count`` held-out patches (default ``validation``), noise included,
-        pseudo-random regions; from the mean MSE over the patches."""
+        """PSNR (dB) of the captures of ``count`` held-out patches (default ``validation``; the same
+        patches and regions on every call), noise included, clipped to [0, 1]; from the mean MSE."""
         n = count or self.spec.validation
+        if n not in self._held_out:
+            self._held_out[n] = self.batch(-1, held_out=True, size=n)
+        images, regions = self._held_out[n]
         with torch.no_grad():
             spots = self.spots(lens)
             airy = self._airy(spots, lens)
-            images, regions = self.batch(-1, held_out=True, size=n)
             total = 0.0
             for k in range(0, n, self.spec.batch):
                 sl = slice(k, k + self.spec.batch)
