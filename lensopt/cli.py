@@ -437,7 +437,7 @@ def simulate(
     as_json: JsonOpt = False,
 ) -> None:
     """Simulate a scene through the lens, computing only the effects the scene calls for."""
-    from lensopt.imaging.commands import parse_grid, run_simulate
+    from lensopt.cli_imaging import parse_grid, run_simulate
 
     if not plan_only and output is None:
         raise LensoptError("needed unless --plan", path="--output")
@@ -501,7 +501,7 @@ def plot_psf(
     seed: SeedOpt = 0,
 ) -> None:
     """RGB PSFs across the field (the spec's fields)."""
-    from lensopt.imaging.commands import plot_psfs
+    from lensopt.cli_imaging import plot_psfs
 
     plot_psfs(load_model(lens), output, sampling=rays, kernel=kernel, diffraction=diffraction, pitch_um=pitch_um,
               sqrt=sqrt, seed=seed)

@@ -10,7 +10,7 @@ from imaging_lenses import oval_model
 
 from lensopt.imaging.plan import PlanOptions, parse_effects
 from lensopt.imaging.simulate import plan_scene, run_plan
-from lensopt.spec import build, load_spec
+from lensopt.spec import build, camera_of, load_spec
 
 SPECS = Path(__file__).resolve().parents[2] / "specs"
 
@@ -18,9 +18,9 @@ SPECS = Path(__file__).resolve().parents[2] / "specs"
 def simulate(model, img: np.ndarray, region: str | None = None, effects: str | None = None, **opts):
     h, w, c = img.shape
     options = PlanOptions(sampling="rings:8", **opts)
-    plan, pilot, reg, sensor = plan_scene(model, {"width": w, "height": h, "channels": c}, region=region,
+    plan, pilot, reg, sensor = plan_scene(camera_of(model), {"width": w, "height": h, "channels": c}, region=region,
                                           effects=parse_effects(effects), options=options)
-    return plan, run_plan(model, plan, pilot, reg, sensor, img, options)
+    return plan, run_plan(camera_of(model), plan, pilot, reg, sensor, img, options)
 
 
 def scene(h: int, w: int, c: int, seed: int = 0) -> np.ndarray:
