@@ -32,6 +32,11 @@ class Model:
     media: tuple[Material, ...]
     spec: LensSpec
 
+    @property
+    def name(self) -> str:
+        """The lens's name (what ``analysis.report`` reads instead of the spec)."""
+        return self.spec.name
+
 
 def resolve_material(value: str | ModelGlassSpec | TabulatedGlassSpec, *, path: str) -> Material:
     """Material object for a spec's ``material`` value; errors name ``path``."""
