@@ -533,5 +533,9 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
     err_console.print(f"wrote {output}")
 
 
+from lensopt.cli_evaluate import register as _register_evaluate  # noqa: E402  (needs the app above)
+
+_register_evaluate(app)
+
 if __name__ == "__main__":  # pragma: no cover
     app()

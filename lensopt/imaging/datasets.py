@@ -28,7 +28,7 @@ import torch
 
 from lensopt.errors import LensoptError
 
-__all__ = ["DeadLeaves", "ImageFolder", "IMAGE_SUFFIXES", "dead_leaves", "center_crop", "random_crop_flip",
+__all__ = ["DeadLeaves", "ImageFolder", "IMAGE_SUFFIXES", "dead_leaves", "is_div2k", "center_crop", "random_crop_flip",
            "sample_batch", "split_files"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr")
@@ -161,6 +161,12 @@ class DeadLeaves:
         return self.scene(index, ph, pw)
 
 
+def is_div2k(root: str | Path) -> bool:
+    """``root`` has the DIV2K layout (a ``train_HR/`` or ``valid_HR/`` subfolder)."""
+    root = Path(root)
+    return any((root / n).is_dir() for pair in _DIV2K.values() for n in pair)
+
+
 def split_files(files: list[Path], root: Path, split: str, val_fraction: float) -> list[Path]:
     """Deterministic split: files ordered by SHA-1 of their path relative to ``root``; the first
     ``round(val_fraction·n)`` (at least one when n ≥ 2 and val_fraction > 0) are validation."""
@@ -228,8 +234,7 @@ class ImageFolder:
 
     @staticmethod
     def _div2k_folder(root: Path, split: str) -> Path | None:
-        names = [n for pair in _DIV2K.values() for n in pair]
-        if not any((root / n).is_dir() for n in names):
+        if not is_div2k(root):
             return None
         if split == "all":
             raise LensoptError("a DIV2K-style folder (train_HR/, valid_HR/): choose split train or val",
