@@ -5,10 +5,11 @@ builds one from a spec; the core (simulation, rendering, evaluation) takes only 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 from lensopt.optics.lens import Lens, System
 
-__all__ = ["Camera", "SpectrumData"]
+__all__ = ["Camera", "SpectrumData", "ProvidesCamera", "as_camera"]
 
 
 @dataclass(frozen=True)
@@ -42,3 +43,14 @@ class Camera:
     spectrum: SpectrumData
     pixel_pitch_um: float | None = None
     resolution: tuple[int, int] | None = None
+
+
+class ProvidesCamera(Protocol):
+    """Anything that can give its ``Camera`` (``lensopt.spec.Model`` does: ``model.camera()``)."""
+
+    def camera(self) -> Camera: ...
+
+
+def as_camera(obj: Camera | ProvidesCamera) -> Camera:
+    """``obj`` itself if it is a ``Camera``, else ``obj.camera()`` (so callers may pass a built model)."""
+    return obj if isinstance(obj, Camera) else obj.camera()

@@ -15,7 +15,7 @@ import torch
 
 from lensopt.analysis.psf_stack import PsfSettings, PsfStack, compute_psfs, select_wavelengths
 from lensopt.errors import LensoptError
-from lensopt.imaging.camera import Camera
+from lensopt.imaging.camera import Camera, ProvidesCamera, as_camera
 from lensopt.imaging.convolve import overlap_add_convolve
 from lensopt.imaging.effects import add_noise, apply_relative_illumination, warp_distortion
 from lensopt.imaging.pilot import Pilot, run_pilot
@@ -44,8 +44,9 @@ def _timed(timings: dict[str, float], name: str) -> Iterator[None]:
     timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
 
 
-def sensor_of(camera: Camera, image_w: int, image_h: int) -> tuple[Sensor, list[str]]:
+def sensor_of(camera: Camera | ProvidesCamera, image_w: int, image_h: int) -> tuple[Sensor, list[str]]:
     """The camera's sensor; without a resolution the image is taken to fill the sensor at its pitch."""
+    camera = as_camera(camera)
     if camera.pixel_pitch_um is None:
         raise LensoptError("needed to simulate an image: give [sensor] pixel_pitch_um (and resolution)",
                            path="sensor")
@@ -58,12 +59,13 @@ def sensor_of(camera: Camera, image_w: int, image_h: int) -> tuple[Sensor, list[
 
 
 def plan_scene(
-    camera: Camera, image_info: dict[str, Any], *, region: str | Region | None, effects: Effects,
-    options: PlanOptions, timings: dict[str, float] | None = None, pilot: Pilot | None = None,
+    camera: Camera | ProvidesCamera, image_info: dict[str, Any], *, region: str | Region | None,
+    effects: Effects, options: PlanOptions, timings: dict[str, float] | None = None, pilot: Pilot | None = None,
 ) -> tuple[ScenePlan, Pilot, Region, Sensor]:
     """Make the plan (runs only the cheap pilot trace, or reuses ``pilot`` from an earlier plan of the
     same camera). ``region``: ``--region`` text or a ``Region`` (e.g. ``TileGrid.region(k)``)."""
     timings = {} if timings is None else timings
+    camera = as_camera(camera)
     sensor, notes = sensor_of(camera, image_info["width"], image_info["height"])
     reg = region if isinstance(region, Region) else parse_region(region, sensor, image_info["width"],
                                                                  image_info["height"])
@@ -75,10 +77,11 @@ def plan_scene(
     return plan, pilot, reg, sensor
 
 
-def run_plan(camera: Camera, plan: ScenePlan, pilot: Pilot, region: Region, sensor: Sensor, image: np.ndarray,
-             options: PlanOptions, timings: dict[str, float] | None = None) -> SimulationResult:
+def run_plan(camera: Camera | ProvidesCamera, plan: ScenePlan, pilot: Pilot, region: Region, sensor: Sensor,
+             image: np.ndarray, options: PlanOptions, timings: dict[str, float] | None = None) -> SimulationResult:
     """Simulate ``image`` (H, W, C linear float32) as planned."""
     timings = {} if timings is None else timings
+    camera = as_camera(camera)
     out = torch.from_numpy(np.ascontiguousarray(image, dtype=np.float32)).permute(2, 0, 1).contiguous()
     eff = plan.effects
     px_mm = plan.pixel_um * 1e-3

@@ -37,6 +37,10 @@ class Model:
         """The lens's name (what ``analysis.report`` reads instead of the spec)."""
         return self.spec.name
 
+    def camera(self) -> Camera:
+        """The plain-data view imaging works on (``camera_of``)."""
+        return camera_of(self)
+
 
 def resolve_material(value: str | ModelGlassSpec | TabulatedGlassSpec, *, path: str) -> Material:
     """Material object for a spec's ``material`` value; errors name ``path``."""

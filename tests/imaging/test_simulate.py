@@ -18,9 +18,9 @@ SPECS = Path(__file__).resolve().parents[2] / "specs"
 def simulate(model, img: np.ndarray, region: str | None = None, effects: str | None = None, **opts):
     h, w, c = img.shape
     options = PlanOptions(sampling="rings:8", **opts)
-    plan, pilot, reg, sensor = plan_scene(camera_of(model), {"width": w, "height": h, "channels": c}, region=region,
+    plan, pilot, reg, sensor = plan_scene(model, {"width": w, "height": h, "channels": c}, region=region,
                                           effects=parse_effects(effects), options=options)
-    return plan, run_plan(camera_of(model), plan, pilot, reg, sensor, img, options)
+    return plan, run_plan(model, plan, pilot, reg, sensor, img, options)
 
 
 def scene(h: int, w: int, c: int, seed: int = 0) -> np.ndarray:
@@ -81,3 +81,12 @@ def test_relative_illumination_and_distortion_effects() -> None:
     plan, res = simulate(cooke, ramp, region="corner", effects="-convolution,distortion")
     assert plan.effects["distortion"]["on"] and not np.array_equal(res.image, ramp)
     assert np.isfinite(res.image).all()
+
+
+def test_a_built_model_or_its_camera_give_the_same_image() -> None:
+    # The core takes a plain Camera; a built model is accepted through model.camera() (no spec import below).
+    model = build(load_spec(SPECS / "cooke_triplet.toml"))
+    img = scene(24, 32, 3)
+    a = simulate(model, img, region="corner")[1].image
+    b = simulate(camera_of(model), img, region="corner")[1].image
+    assert np.array_equal(a, b)
