@@ -110,3 +110,8 @@ def test_bad_input_is_one_line_exit_2(tmp_path: Path, args: list[str], path: str
     r = runner.invoke(app, ["evaluate", str(CMOUNT), *[a.format(tmp=tmp_path) for a in args]])
     assert r.exit_code == 2, r.output
     assert path in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_lens_without_sensor_is_one_line_exit_2() -> None:
+    r = runner.invoke(app, ["evaluate", str(ROOT / "specs" / "double_gauss.toml"), "--count", "1"])
+    assert r.exit_code == 2 and r.stderr.startswith("error: sensor:"), r.output
