@@ -14,6 +14,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from lensopt.spec.optim import OptimizeSpec
+from lensopt.spec.tolerance import ToleranceSpec
 
 __all__ = [
     "ApertureSpec",
@@ -452,6 +453,7 @@ class LensSpec(_Model):
     image: ImageSpec = Field(default_factory=ImageSpec)
     elements: list[ElementPlacementSpec] | None = None
     optimize: OptimizeSpec | None = None
+    tolerance: ToleranceSpec | None = None
 
     @model_validator(mode="after")
     def _structure(self) -> LensSpec:
