@@ -23,8 +23,8 @@ from lensopt.tolerance.evaluate import EvalSetup
 from lensopt.tolerance.model import (
     ARCMIN,
     KINDS,
-    TrialParams,
     Tolerance,
+    TrialParams,
     elements_of,
     glass_gaps,
     nominal_params,
