@@ -131,6 +131,7 @@ def _one(setup: EvalSetup, p: dict[str, Tensor]) -> dict[str, Tensor]:
     out = {
         "esr": torch.where(lost_field, inf, esr),
         "rms": torch.where(lost_field, inf, rms),
+        "centroid": centroid,
         "focus_shift": dz,
         "compensator_ok": ok,
         "failed_rays": (~valid).sum(),
@@ -169,7 +170,8 @@ def _mtf(lens: Lens, b: Bundle, xy: Tensor, valid: Tensor, ww: Tensor, centroid:
 def evaluate(setup: EvalSetup, params: TrialParams) -> dict[str, Tensor]:
     """Metrics of every trial in ``params`` (leading dimension K), in one vmapped call.
 
-    Returns a dict of tensors with leading dimension K: ``esr`` (mm), ``rms`` (K, F) mm,
+    Returns a dict of tensors with leading dimension K: ``esr`` (mm), ``rms`` (K, F) mm, ``centroid``
+    (K, F, 2) mm (on the compensated image plane),
     ``distortion`` (%), ``focus_shift`` (mm), ``compensator_ok`` (bool), ``failed_rays`` (int), and
     ``mtf_s``/``mtf_t`` (K, F) when an MTF frequency is set.
     """

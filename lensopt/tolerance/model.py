@@ -217,6 +217,8 @@ def perturb(
     gdec = base.group_decenter.expand(k, -1, -1).clone()
     gtilt = base.group_tilt.expand(k, -1, -1).clone()
     elements = list(placement.groups)
+    shift = torch.zeros(k, index.shape[1], dtype=lens.dtype, device=lens.device)  # Δn_d per medium
+    spread = torch.ones_like(shift)  # V_d factor per medium
     for t, tol in enumerate(tols):
         v = values[:, t].to(lens.dtype)
         kind, s = tol.kind, tol.target
@@ -229,10 +231,9 @@ def perturb(
         elif kind == "thickness":
             thick[:, s] = thick[:, s] + v
         elif kind == "index":
-            index[:, s + 1] = index[:, s + 1] + v[:, None]
+            shift[:, s + 1] = shift[:, s + 1] + v
         elif kind == "abbe":
-            n = index[:, s + 1]
-            index[:, s + 1] = nd[s + 1] + (n - nd[s + 1]) / (1.0 + v[:, None] / 100.0)
+            spread[:, s + 1] = spread[:, s + 1] * (1.0 + v / 100.0)
         elif kind in ("decenter_x", "decenter_y"):
             dec[:, s, 0 if kind.endswith("x") else 1] += v
         elif kind in ("tilt_x", "tilt_y"):
@@ -246,6 +247,11 @@ def perturb(
                 gtilt[:, g, axis] += v * ARCMIN
         else:
             raise ValueError(f"unknown tolerance kind {kind!r}")
+    # n(λ) = n_d + Δn + (n0(λ) − n_d) / f: the index moves as a whole, the dispersion n_F − n_C scales
+    # by 1/f so that V_d = (n_d − 1)/(n_F − n_C) scales by f (n_d + Δn − 1 over that: Δn/(n_d − 1) is
+    # the index tolerance's own, tiny, effect on V_d).
+    ndv = nd.to(lens.dtype)[None, :, None]
+    index = ndv + shift[..., None] + (index - ndv) / spread[..., None]
     return TrialParams(curv, thick, index, dec, tilt, gdec, gtilt)
 
 
