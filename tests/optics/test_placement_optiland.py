@@ -187,3 +187,22 @@ def test_spec_fields_build_the_placement() -> None:
     data["elements"] = [{"surfaces": (2, 30)}]
     with pytest.raises((LensoptError, ValidationError)):
         parse_spec(data)
+
+
+def test_two_dimensional_fields_rotate_on_a_symmetric_lens() -> None:
+    """A field along x on a rotationally symmetric lens is the y field turned by 90° (invariant): the
+    centroid of field (u, 0) is (ȳ, 0) where ȳ is that of field (0, u), on a full-pupil grid that the
+    turn maps onto itself."""
+    model = _model()
+    u = torch.tensor([0.0, 0.7, 1.0], dtype=torch.float64)
+    pupil = pupil_grid(9, dtype=torch.float64)
+    along_y = trace_bundle(model.lens, model.system, pupil, rel_field=u)
+    along_x = trace_bundle(model.lens, model.system, pupil, rel_field=torch.zeros_like(u), rel_field_x=u)
+    wy = along_y.result.pos[..., :2].mean(2)  # (F, W, 2)
+    wx = along_x.result.pos[..., :2].mean(2)
+    assert torch.allclose(wx[..., 0], wy[..., 1], atol=1e-12) and torch.allclose(wx[..., 1], wy[..., 0], atol=1e-12)
+    # And a decentered lens is traced on the full pupil even from a half-pupil sampling.
+    lens = dataclasses.replace(model.lens, placement=no_placement(model.lens.num_surfaces, dtype=torch.float64))
+    half = torch.tensor([[0.5, 0.2]], dtype=torch.float64)
+    b = trace_bundle(lens, model.system, half, half_pupil=True)
+    assert not b.half_pupil and b.pupil.shape[-2] == 2
