@@ -84,7 +84,7 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
         start = time.perf_counter()
         mc = monte_carlo(job, settings.trials, settings.seed, scheduler=scheduler, workers=workers)
         elapsed = time.perf_counter() - start
-        per = {k: _describe(v) for k, v in mc.metrics.items() if v.ndim == 1 and k not in ("compensator_ok",)}
+        per = {k: _describe(v) for k, v in mc.metrics.items() if v.ndim == 1 and k != "compensator_ok"}
         report["monte_carlo"] = {"trials": mc.num_trials, "seconds": elapsed,
                                  "seconds_per_trial": elapsed / mc.num_trials,
                                  "scheduler": scheduler or "serial", "stats": mc.stats, "yields": mc.yields,
@@ -94,8 +94,10 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
             saved = []
             for rank, k in enumerate(mc.worst(worst)):
                 params = job.params(torch.from_numpy(mc.values[k:k + 1]))
+                offsets = mc.metrics["lm_offsets"][k] if "lm_offsets" in mc.metrics else None
                 spec = trial_spec(model, params, float(mc.metrics["focus_shift"][k]),
-                                  name=f"{model.spec.name} — tolerance trial {k} (rank {rank + 1} worst)")
+                                  name=f"{model.spec.name} — tolerance trial {k} (rank {rank + 1} worst)",
+                                  lm_vars=job.setup.lm_vars, lm_offsets=offsets)
                 path = out_dir / f"worst_{rank + 1}_trial_{k}.json"
                 save_json(spec, path)
                 saved.append({"trial": k, "value": float(mc.scalar[k]), "path": str(path)})
@@ -203,7 +205,8 @@ def register(app: typer.Typer, plot_app: typer.Typer) -> None:
         mtf_frequency: Annotated[float | None, typer.Option("--mtf-frequency", help="cycles/mm of the MTF "
                                                             "metric.")] = None,
         sampling: Annotated[str | None, typer.Option("--sampling", help="Pupil sampling per trial.")] = None,
-        compensator: Annotated[str | None, typer.Option("--compensator", help="focus | none.")] = None,
+        compensator: Annotated[str | None, typer.Option("--compensator", help="focus | lm | none (lm: "
+                                                        "the spec's variables by a few LM steps).")] = None,
         scheduler: Annotated[str, typer.Option("--scheduler", help="local (a 2-worker Dask LocalCluster), "
                                                "serial, or a Dask scheduler address.")] = "local",
         workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="LocalCluster workers.")] = 2,

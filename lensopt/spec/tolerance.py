@@ -46,14 +46,17 @@ class ToleranceItemSpec(_Model):
 
 
 class ToleranceSpec(_Model):
-    """Settings of ``lensopt tolerance``; ``profile`` starts from a named set (S6.2), ``items`` add to it."""
+    """Settings of ``lensopt tolerance``; ``profile`` starts from a named set (S6.2), ``items`` add to it.
+    ``compensator = "lm"``: the back focus in closed form plus the spec's variables (``vary`` radius and
+    thickness entries) re-optimized by ``lm_steps`` Levenberg–Marquardt steps per trial."""
 
     profile: Literal["s6.2"] | None = None
     items: list[ToleranceItemSpec] = Field(default_factory=list)
     distribution: _Dist = "uniform"
     trials: int = Field(default=100, ge=1, le=1_000_000)
     seed: int = 0
-    compensator: Literal["none", "focus"] = "focus"
+    compensator: Literal["none", "focus", "lm"] = "focus"
+    lm_steps: int = Field(default=5, ge=1, le=100)
     focus_range: float = Field(default=1.0, gt=0)
     metric: Literal["esr", "rms", "mtf", "distortion"] = "esr"
     mtf_frequency: float | None = Field(default=None, gt=0)

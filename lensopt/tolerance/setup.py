@@ -32,7 +32,7 @@ from lensopt.tolerance.model import (
 )
 from lensopt.tolerance.run import Job
 
-__all__ = ["tolerances_for", "make_job", "trial_spec", "semi_apertures", "d_line_indices"]
+__all__ = ["tolerances_for", "make_job", "trial_spec", "semi_apertures", "d_line_indices", "lm_variables"]
 
 D_LINE_UM = 0.5875618
 
@@ -114,6 +114,19 @@ def semi_apertures(model: Model) -> torch.Tensor:
     return torch.tensor(out, dtype=lens.dtype)
 
 
+def lm_variables(model: Model) -> tuple[tuple[str, int], ...]:
+    """LM compensators from the spec's ``vary`` lists: radius → curvature, thickness (not the last gap,
+    the closed-form back focus); other variable kinds are not compensators."""
+    out: list[tuple[str, int]] = []
+    last = len(model.spec.surfaces) - 1
+    for s, surf in enumerate(model.spec.surfaces):
+        if "radius" in surf.vary:
+            out.append(("curvature", s))
+        if "thickness" in surf.vary and s != last:
+            out.append(("thickness", s))
+    return tuple(out)
+
+
 def make_job(model: Model, settings: Any, tols: list[Tolerance] | None = None) -> Job:
     """The ``Job`` of a lens and its tolerance settings (``ToleranceSpec``-like)."""
     tols = tolerances_for(model, settings) if tols is None else tols
@@ -126,16 +139,29 @@ def make_job(model: Model, settings: Any, tols: list[Tolerance] | None = None) -
     placement = nominal_params(lens)[1] if placed else None
     sampling = PupilSampling.parse(settings.sampling, seed=settings.seed, path="tolerance.sampling")
     pupil = sampling.points(dtype=lens.dtype)
+    lm_vars = lm_variables(model) if settings.compensator == "lm" else ()
+    if settings.compensator == "lm" and not lm_vars:
+        raise LensoptError("compensator = \"lm\" needs spec variables (vary = [\"radius\"] or [\"thickness\"] "
+                           "on some surface other than the last)", path="tolerance.compensator", got="lm")
     setup = EvalSetup(lens, model.system, placement, pupil, sampling.half,
                       compensate=settings.compensator, focus_range=settings.focus_range,
-                      mtf_frequency=settings.mtf_frequency)
+                      mtf_frequency=settings.mtf_frequency, lm_vars=lm_vars,
+                      lm_steps=getattr(settings, "lm_steps", 5))
     return Job(setup, tuple(tols), d_line_indices(model), semi_apertures(model), settings.metric, settings.chunk)
 
 
-def trial_spec(model: Model, params: TrialParams, focus_shift: float, *, name: str) -> Any:
-    """One trial (``params`` with K = 1) as a lens spec, the compensator in the last thickness."""
+def trial_spec(model: Model, params: TrialParams, focus_shift: float, *, name: str,
+               lm_vars: tuple[tuple[str, int], ...] = (), lm_offsets: Any = None) -> Any:
+    """One trial (``params`` with K = 1) as a lens spec, the compensators applied (the back focus in the
+    last thickness, LM offsets ``lm_offsets`` (V,) on ``lm_vars``)."""
     spec = model.spec
     lens = model.lens
+    if lm_vars and lm_offsets is not None:
+        curv, thick = params.curvature.clone(), params.thickness.clone()
+        for v, (kind, s) in enumerate(lm_vars):
+            target = curv if kind == "curvature" else thick
+            target[0, s] = target[0, s] + float(lm_offsets[v])
+        params = dataclasses.replace(params, curvature=curv, thickness=thick)
     data = spec.model_dump(exclude_none=True)
     data["name"] = name
     data.pop("tolerance", None)

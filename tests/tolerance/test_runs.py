@@ -174,3 +174,37 @@ def test_same_seed_serial_and_two_worker_local_cluster() -> None:
     for key in serial.metrics:
         np.testing.assert_allclose(serial.metrics[key], dask.metrics[key], rtol=1e-13, atol=0)
     assert [r["value"] for r in serial.yields] == pytest.approx([r["value"] for r in dask.yields], rel=1e-13)
+
+
+def _one_variable_cmount():
+    """The C-mount with a single spec variable: the radius of surface 7 (an LM compensator)."""
+    from lensopt.spec.io import parse_spec
+
+    data = load_spec(CMOUNT).model_dump(exclude_none=True)
+    for i, surf in enumerate(data["surfaces"]):
+        surf["vary"] = ["radius"] if i == 7 else []
+    return build(parse_spec(data))
+
+
+def test_lm_compensator_never_worse_than_focus_and_reports_convergence() -> None:
+    model = _one_variable_cmount()
+    base = {"profile": "s6.2", "sampling": "rings:3"}
+    values = draw(list(_job(model, **base).tols), 2, seed=7) * 4
+    focus = run_trials(_job(model, **base), values)
+    lm_job = _job(model, **base, compensator="lm", lm_steps=6)
+    assert lm_job.setup.lm_vars == (("curvature", 7),)
+    lm = run_trials(lm_job, values)
+    # LM starts from the focus-compensated lens and accepts only steps that lower the ESR.
+    assert np.all(lm["esr"] <= focus["esr"] * (1 + 1e-12))
+    assert np.any(lm["esr"] < focus["esr"] * (1 - 1e-4))
+    assert lm["compensator_ok"].all()  # one variable, 6 steps: converged
+    one = run_trials(_job(model, **base, compensator="lm", lm_steps=1), values)
+    assert not one["compensator_ok"].any()  # one damped step does not converge: reported, not raised
+    # The written trial carries the LM offset: rebuilt and traced, it has the trial's ESR.
+    k = int(np.argmax(lm["esr"]))
+    spec = trial_spec(model, lm_job.params(values[k:k + 1]), float(lm["focus_shift"][k]), name="t",
+                      lm_vars=lm_job.setup.lm_vars, lm_offsets=lm["lm_offsets"][k])
+    rebuilt = build(spec)
+    p, _ = nominal_params(rebuilt.lens)
+    setup = EvalSetup(rebuilt.lens, rebuilt.system, None, lm_job.setup.pupil, lm_job.setup.half, compensate="none")
+    assert float(evaluate(setup, p)["esr"][0]) == pytest.approx(float(lm["esr"][k]), rel=1e-9)
