@@ -19,6 +19,7 @@ from rich.console import Console
 from rich.logging import RichHandler
 from rich.table import Table
 
+from lensopt.cli_backend import BackendOpt, with_backend
 from lensopt.errors import LensoptError
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec import Model, build, load_spec
@@ -90,8 +91,9 @@ def print_json(obj: Any) -> None:
 
 @app.command()
 @handle_errors
+@with_backend(err_console)
 def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None, seed: SeedOpt = 0,
-          as_json: JsonOpt = False, aim_steps: AimStepsOpt = None) -> None:
+          as_json: JsonOpt = False, aim_steps: AimStepsOpt = None, backend: BackendOpt = "auto") -> None:
     """First-order data, RMS spot radius per field and wavelength, ray failures, distortion and
     relative illumination per field."""
     from lensopt.analysis.report import trace_report
@@ -418,6 +420,7 @@ def optimize(
 
 @app.command()
 @handle_errors
+@with_backend(err_console)
 def simulate(
     lens: LensArg,
     image: Annotated[Path, typer.Argument(help="Scene image (PNG/JPEG/TIFF/EXR; 8/16-bit files are sRGB).")],
@@ -435,6 +438,7 @@ def simulate(
     overlap: Annotated[float, typer.Option("--overlap", help="Overlap of patches (S1.5.2).")] = 0.25,
     seed: SeedOpt = 0,
     as_json: JsonOpt = False,
+    backend: BackendOpt = "auto",
 ) -> None:
     """Simulate a scene through the lens, computing only the effects the scene calls for."""
     from lensopt.imaging.commands import parse_grid, run_simulate
@@ -489,6 +493,7 @@ def _render_run(r: dict[str, Any]) -> None:
 
 @plot_app.command("psf")
 @handle_errors
+@with_backend(err_console)
 def plot_psf(
     lens: LensArg,
     output: Annotated[Path, typer.Option("--output", "-o", help="Figure file (png, pdf, svg).")],
@@ -499,6 +504,7 @@ def plot_psf(
                                                    "else 1 µm).")] = None,
     sqrt: Annotated[bool, typer.Option("--sqrt", help="Square-root intensity scale (shows the tails).")] = False,
     seed: SeedOpt = 0,
+    backend: BackendOpt = "auto",
 ) -> None:
     """RGB PSFs across the field (the spec's fields)."""
     from lensopt.imaging.commands import plot_psfs

@@ -21,10 +21,11 @@ import torch
 from torch import Tensor
 
 from lensopt.optics.aiming import ChiefAim, PupilAim, aim_chief, aim_full
+from lensopt.optics.backend import trace_with
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import FirstOrder, field_tangents, first_order
 from lensopt.optics.sampling import launch
-from lensopt.optics.trace import Rays, RayTrace, Status, trace
+from lensopt.optics.trace import Rays, RayTrace, Status
 from lensopt.optics.vignetting import (
     apply_vignetting,
     clip_ellipse_to_disc,
@@ -140,6 +141,7 @@ def trace_bundle(
     vignetting: Tensor | None = None,
     aim_steps: int | None = None,
     shape: PupilShape | None = None,
+    backend: str | None = None,
 ) -> Bundle:
     """Trace pupil points ``pupil`` ((P, 2) or (F, W, P, 2)) for every field and wavelength.
 
@@ -154,6 +156,7 @@ def trace_bundle(
         aim_steps: Newton steps of ``full`` aiming; default: the system's.
         shape: the pupil shape already computed by ``pupil_shape`` for these fields (saves aiming
             again when several bundles share fields); ``aim``/``vignetting`` are then not used.
+        backend: ``auto``, ``eager`` or ``compiled`` (``optics.backend``); default: ``use_backend``'s.
     """
     fo = first_order(lens, system) if fo is None else fo
     if rel_field is None:
@@ -171,7 +174,7 @@ def trace_bundle(
     if shape.factors is not None:
         pupil = apply_vignetting(pupil, shape.factors)
     rays = launch(lens, system, pupil, tan, epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z)
-    result = trace(lens, rays, record=record)
+    result = trace_with(lens, rays, record=record, backend=backend)
     fa = system.front_aperture
     if fa is not None:
         # Rays outside the opening (a field blocked entirely, or the corners of an ``extent`` ellipse)
