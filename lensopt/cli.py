@@ -538,6 +538,10 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
     save_figure(field_figure(summary, title=title, subtitle=sub), out, dpi=dpi)
     err_console.print(f"wrote {output}")
 
+from lensopt.cli_check import register as _register_check  # noqa: E402
+
+_register_check(app)
+
 
 if __name__ == "__main__":  # pragma: no cover
     app()
