@@ -541,6 +541,9 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
 from lensopt.cli_check import register as _register_check  # noqa: E402
 
 _register_check(app)
+from lensopt.cli_accuracy import register as _register_accuracy  # noqa: E402
+
+_register_accuracy(app)
 
 
 if __name__ == "__main__":  # pragma: no cover
