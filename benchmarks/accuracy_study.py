@@ -130,6 +130,30 @@ def part_commands(repeats: int) -> None:
         {"rows": [{"lens": a, "command": b, "times_s": c} for a, b, c in rows], "load": os.getloadavg()}, indent=1))
 
 
+def part_illumination(grid: int) -> None:
+    """The flux-counting illumination reference (millions of rays in 2 M-ray tiles) per backend, in process."""
+    from lensopt.analysis.irradiance import relative_illumination_flux
+    from lensopt.optics import backend
+
+    model = build(load_spec(ROOT / "specs" / "wide_angle_laikin.toml"))
+    print(f"\n### relative_illumination_flux, specs/wide_angle_laikin.toml, grid {grid}, spec fields\n")
+    print("| backend | s | RI per field |")
+    print("| --- | --- | --- |")
+    base = None
+    for name in ("eager", "auto", "compiled", "auto"):
+        backend.reset_auto_counts()
+        t0 = time.perf_counter()
+        with use_backend(name):
+            r = relative_illumination_flux(model.lens, model.system, model.system.rel_field, grid=grid)
+        dt = time.perf_counter() - t0
+        ri = r.relative_illumination if hasattr(r, "relative_illumination") else r
+        vals = [float(v) for v in torch.as_tensor(ri).flatten()]
+        base = base or vals
+        diff = max(abs(a - b) for a, b in zip(vals, base, strict=True))
+        print(f"| {name} | {dt:.1f} | {', '.join(f'{v:.6f}' for v in vals)} (max diff to eager {diff:.1e}) |",
+              flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--part", default="accuracy,third,commands")
@@ -145,6 +169,8 @@ def main() -> None:
         print("\n| lens | command | eager s (before) | auto s (default) | compiled s | compiled runs |")
         print("| --- | --- | --- | --- | --- | --- |")
         part_commands(a.repeats)
+    if "illumination" in parts:
+        part_illumination(401)
     print(f"load after: {os.getloadavg()}")
 
 
