@@ -19,14 +19,18 @@ LABELS = {"esr": "ESR relative error", "rms": "worst-field RMS relative error",
 
 def accuracy_figure(result: dict[str, Any], *, title: str = "") -> Figure:
     metrics = [m for m in LABELS if any(m in p["errors"] for p in result["points"])]
-    fig = new_figure(4.2 * max(1, len(metrics)), 3.8)
-    axes = fig.subplots(1, max(1, len(metrics)), squeeze=False)[0]
+    cols = min(3, max(1, len(metrics)))
+    rows = -(-max(1, len(metrics)) // cols)
+    fig = new_figure(4.4 * cols, 3.6 * rows)
+    axes = list(fig.subplots(rows, cols, squeeze=False).flat)
+    for ax in axes[len(metrics):]:
+        ax.set_visible(False)
     target = result.get("target")
     for ax, m in zip(axes, metrics, strict=False):
         knobs = list(dict.fromkeys(p["knob"] for p in result["points"] if m in p["errors"]))
         for i, k in enumerate(knobs):
-            pts = sorted((p for p in result["points"] if p["knob"] == k and m in p["errors"]),
-                         key=lambda p: p["time_s"])
+            # In sweep order (rays, grid size ...): timings of cheap settings are noisy, the order is not.
+            pts = [p for p in result["points"] if p["knob"] == k and m in p["errors"]]
             ax.plot([p["time_s"] for p in pts], [max(p["errors"][m], 1e-16) for p in pts], "o-", ms=3, lw=1,
                     color=field_color(i), label=k)
         front = result.get("pareto", {}).get(m, [])
