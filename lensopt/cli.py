@@ -20,6 +20,7 @@ from rich.logging import RichHandler
 from rich.markup import escape
 from rich.table import Table
 
+from lensopt.cli_backend import BackendOpt, with_backend
 from lensopt.errors import LensoptError
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec import Model, build, load_spec
@@ -91,10 +92,12 @@ def print_json(obj: Any) -> None:
 
 @app.command()
 @handle_errors
+@with_backend(err_console)
 def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None, seed: SeedOpt = 0,
           as_json: JsonOpt = False, aim_steps: AimStepsOpt = None,
           mtf: Annotated[str | None, typer.Option("--mtf", help="Also MTF at these cycles/mm (comma-separated; "
-                                                  "in --json as mtf).")] = None) -> None:
+                                                  "in --json as mtf).")] = None,
+          backend: BackendOpt = "auto") -> None:
     """First-order data, RMS spot radius per field and wavelength, ray failures, distortion and
     relative illumination per field."""
     from lensopt.analysis.report import trace_report
@@ -425,6 +428,7 @@ def optimize(
 
 @app.command()
 @handle_errors
+@with_backend(err_console)
 def simulate(
     lens: LensArg,
     image: Annotated[Path, typer.Argument(help="Scene image (PNG/JPEG/TIFF/EXR; 8/16-bit files are sRGB).")],
@@ -442,6 +446,7 @@ def simulate(
     overlap: Annotated[float, typer.Option("--overlap", help="Overlap of patches (S1.5.2).")] = 0.25,
     seed: SeedOpt = 0,
     as_json: JsonOpt = False,
+    backend: BackendOpt = "auto",
 ) -> None:
     """Simulate a scene through the lens, computing only the effects the scene calls for."""
     from lensopt.cli_imaging import parse_grid, run_simulate
@@ -496,6 +501,7 @@ def _render_run(r: dict[str, Any]) -> None:
 
 @plot_app.command("psf")
 @handle_errors
+@with_backend(err_console)
 def plot_psf(
     lens: LensArg,
     output: Annotated[Path, typer.Option("--output", "-o", help="Figure file (png, pdf, svg).")],
@@ -506,6 +512,7 @@ def plot_psf(
                                                    "else 1 µm).")] = None,
     sqrt: Annotated[bool, typer.Option("--sqrt", help="Square-root intensity scale (shows the tails).")] = False,
     seed: SeedOpt = 0,
+    backend: BackendOpt = "auto",
 ) -> None:
     """RGB PSFs across the field (the spec's fields)."""
     from lensopt.cli_imaging import plot_psfs
@@ -538,6 +545,13 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
     title, sub = _titles(model)
     save_figure(field_figure(summary, title=title, subtitle=sub), out, dpi=dpi)
     err_console.print(f"wrote {output}")
+
+from lensopt.cli_check import register as _register_check  # noqa: E402
+
+_register_check(app)
+from lensopt.cli_accuracy import register as _register_accuracy  # noqa: E402
+
+_register_accuracy(app)
 
 
 from lensopt.cli_evaluate import register as _register_evaluate  # noqa: E402  (needs the app above)

@@ -21,10 +21,11 @@ import torch
 from torch import Tensor
 
 from lensopt.optics.aiming import ChiefAim, PupilAim, aim_chief, aim_full
+from lensopt.optics.backend import trace_with
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import FirstOrder, field_tangents, first_order
 from lensopt.optics.sampling import launch
-from lensopt.optics.trace import Rays, RayTrace, Status, trace
+from lensopt.optics.trace import Rays, RayTrace, Status
 from lensopt.optics.vignetting import (
     apply_vignetting,
     clip_ellipse_to_disc,
@@ -141,6 +142,7 @@ def trace_bundle(
     aim_steps: int | None = None,
     shape: PupilShape | None = None,
     rel_field_x: Tensor | None = None,
+    backend: str | None = None,
 ) -> Bundle:
     """Trace pupil points ``pupil`` ((P, 2) or (F, W, P, 2)) for every field and wavelength.
 
@@ -157,6 +159,7 @@ def trace_bundle(
             again when several bundles share fields); ``aim``/``vignetting`` are then not used.
         rel_field_x: (F,) relative fields in x (two-dimensional fields, for lenses that are not
             rotationally symmetric), scaled like ``rel_field``; needs ``aim = none``.
+        backend: ``auto``, ``eager`` or ``compiled`` (``optics.backend``); default: ``use_backend``'s.
 
     A lens with a placement (decentered or tilted surfaces) has no mirror symmetry: a half-pupil
     sampling is mirrored to the full pupil here and ``half_pupil`` becomes False, so centroids are
@@ -186,7 +189,7 @@ def trace_bundle(
     if shape.factors is not None:
         pupil = apply_vignetting(pupil, shape.factors)
     rays = launch(lens, system, pupil, tan, epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z, tan_field_x=tan_x)
-    result = trace(lens, rays, record=record)
+    result = trace_with(lens, rays, record=record, backend=backend)
     fa = system.front_aperture
     if fa is not None:
         # Rays outside the opening (a field blocked entirely, or the corners of an ``extent`` ellipse)

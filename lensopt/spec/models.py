@@ -441,6 +441,32 @@ class ImageSpec(_Model):
     defocus: float = 0.0
 
 
+CHECK_METRICS = {
+    "efl_mm": 1e-5, "bfl_mm": 1e-5, "fnumber": 1e-6, "ttl_mm": 1e-5, "esr_um": 1e-3, "rms_um": 1e-3,
+    "distortion_percent": 1e-4, "ri": 1e-5, "failed_rays": 0.0, "margin": 1e-3,
+}
+"""Metric families of ``lensopt check`` and their default absolute tolerances (in the metric's unit:
+mm, µm, %, a fraction, a ray count; margins in their constraint's unit). The metrics are computed with
+fixed, seeded settings, so only rounding differences across platforms must pass: a 0.01 mm change of
+one thickness or a swapped glass moves several of them far past these."""
+
+
+class CheckSpec(_Model):
+    """``[check]``: tolerances of ``lensopt check`` per metric family (absolute; see ``CHECK_METRICS``)."""
+
+    tolerances: dict[str, float] = Field(default_factory=dict)
+
+    @field_validator("tolerances")
+    @classmethod
+    def _known(cls, v: dict[str, float]) -> dict[str, float]:
+        for k, tol in v.items():
+            if k not in CHECK_METRICS:
+                raise ValueError(f"@{k}: unknown metric; one of {', '.join(CHECK_METRICS)}")
+            if not tol >= 0:
+                raise ValueError(f"@{k}: a tolerance must be ≥ 0, got {tol}")
+        return v
+
+
 class LensSpec(_Model):
     """A complete lens: system, spectrum, optional sensor, surfaces in order, image, and the optional
     ``[optimize]`` section read by ``lensopt optimize`` (see ``lensopt.spec.optim``)."""
@@ -454,6 +480,7 @@ class LensSpec(_Model):
     elements: list[ElementPlacementSpec] | None = None
     optimize: OptimizeSpec | None = None
     tolerance: ToleranceSpec | None = None
+    check: CheckSpec | None = None
 
     @model_validator(mode="after")
     def _structure(self) -> LensSpec:
