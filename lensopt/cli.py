@@ -533,5 +533,9 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
     err_console.print(f"wrote {output}")
 
 
+from lensopt.cli_zemax import register as _register_zemax  # noqa: E402
+
+_register_zemax(app)
+
 if __name__ == "__main__":  # pragma: no cover
     app()
