@@ -497,7 +497,9 @@ def _material(zf: ZFile, s: ZSurface, catalogs: Any, gcat: list[str], extra: dic
             raise SpecError(f"{where}: unknown glass {name!r}{cats}: not in lensopt's catalogs; give its AGF "
                             "catalog with --catalog FILE.agf", path=src) from None
     found = candidates[0]
-    if nd_file is not None and len(candidates) > 1:
+    if nd_file is not None and (nd_file, vd_file) == (1.5, 40.0):
+        nd_file = None  # what older Zemax versions write for a catalog glass: a placeholder, not data
+    if nd_file is not None and len(candidates) > 1 and min(abs(g.nd - nd_file) for g in candidates) <= 1e-3:
         # A name in several catalogs (F2: Schott and Hikari): the GLAS line's nd/vd pick the one meant.
         found = min(candidates, key=lambda g: abs(g.nd - nd_file) + abs(g.vd - (vd_file or g.vd)) / 100)
     ex = extra.get("material")

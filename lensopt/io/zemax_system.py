@@ -107,8 +107,10 @@ def system_from_zemax(zf: Any, surfaces: list[dict[str, Any]], object_distance: 
     model = build(provisional)
     fo = first_order(model.lens, model.system)
     n_image = float(model.lens.index[-1, model.system.reference])
-    data["system"]["field"], vig = _fields(zf, kind, n_fields, object_distance, fo, extras, warnings)
     data["system"]["aperture"] = _aperture(zf, object_distance, fo, n_image, extras, warnings)
+    data["system"]["field"], vig = _fields(zf, kind, n_fields, object_distance, fo, extras, warnings)
+    if kind == 3:
+        data["system"]["field"] = _real_image_height_field(data, data["system"]["field"], fo, warnings)
     if vig is not None:
         data["system"]["vignetting"] = vig
     return parse_spec(data)
@@ -172,10 +174,10 @@ def zf_extras_wavelengths(zf: Any) -> list[float] | None:
 def _fields(zf: Any, kind: int, n_fields: int | None, object_distance: float | None, fo: Any,
             extras: dict[str, Any], warnings: list[str]) -> tuple[dict[str, Any], dict[str, list[float]] | None]:
     src = zf.source
-    if kind in (3, 4):
-        raise SpecError(f"field type FTYP {kind} ({'real image height' if kind == 3 else 'theodolite angle'}) "
-                        "is not supported; use angle, object height or paraxial image height", path=src)
-    if kind not in (0, 1, 2):
+    if kind == 4:
+        raise SpecError("field type FTYP 4 (theodolite angle) is not supported; use angle, object height or "
+                        "(paraxial or real) image height", path=src)
+    if kind not in (0, 1, 2, 3):
         raise SpecError(f"unknown field type FTYP {kind}", path=src)
     ys = _values(zf, "YFLN", n_fields) or _values(zf, "YFLD", n_fields) or [0.0]
     xs = _values(zf, "XFLN", n_fields) or _values(zf, "XFLD", n_fields) or [0.0] * len(ys)
@@ -213,11 +215,76 @@ def _fields(zf: Any, kind: int, n_fields: int | None, object_distance: float | N
             pass
     if top == 0:
         top = 1.0
-    out: dict[str, Any] = {"image_height" if kind == 2 else "hfov_deg": top, "relative": relative}
+    out: dict[str, Any] = {"image_height" if kind in (2, 3) else "hfov_deg": top, "relative": relative}
     weights = _values(zf, "FWGN", n)
     if weights is not None and len(weights) == n and any(w != 1.0 for w in weights):
         out["weights"] = weights
     return out, _vignetting(zf, n, warnings)
+
+
+def _real_image_height_field(data: dict[str, Any], fld: dict[str, Any], fo: Any,
+                             warnings: list[str]) -> dict[str, Any]:
+    """Zemax's real image heights (FTYP 3) as object angles: for each height h, the angle whose real chief
+    ray (aimed as the lens's ``aim`` says) lands at h on the image surface. Secant iterations on all fields
+    at once (one trace per iteration), to 1e-12 relative."""
+    import copy
+
+    import torch
+
+    from lensopt.optics.bundle import trace_bundle
+
+    top = fld["image_height"]
+    targets = [u * top for u in fld["relative"]]
+    live = [i for i, h in enumerate(targets) if h > 0]
+
+    def heights(angles: list[float]) -> list[float]:
+        d = copy.deepcopy(data)
+        a_max = max(angles)
+        d["system"]["field"] = {"hfov_deg": a_max, "relative": [a / a_max for a in angles]}
+        d["system"].pop("vignetting", None)
+        model = build(parse_spec(d))
+        bundle = trace_bundle(model.lens, model.system, torch.zeros(1, 2, dtype=torch.float64))
+        ref = model.system.reference
+        if not bool(bundle.result.valid[:, ref, 0].all()):
+            raise SpecError("a real chief ray does not reach the image while solving the real image height "
+                            "fields (FTYP 3)", path="FTYP")
+        return bundle.result.pos[:, ref, 0, 1].abs().tolist()
+
+    angles = [0.0] * len(targets)
+    if live:
+        t0 = [math.degrees(math.atan(targets[i] / abs(float(fo.efl)))) for i in live]
+        t1 = [t * 1.001 for t in t0]
+        y0 = [heights(_fill(angles, live, t0))[i] - targets[i] for i in live]
+        y1 = [heights(_fill(angles, live, t1))[i] - targets[i] for i in live]
+        for _ in range(30):
+            if all(abs(e) <= 1e-12 * targets[i] for e, i in zip(y1, live, strict=True)):
+                break
+            step = [(e1 * (b - a) / (e1 - e0)) if e1 != e0 else 0.0
+                    for a, b, e0, e1 in zip(t0, t1, y0, y1, strict=True)]
+            t0, y0 = t1, y1
+            t1 = [b - s for b, s in zip(t1, step, strict=True)]
+            if not all(0 < t < 90 for t in t1):
+                raise SpecError("could not solve the real image height fields (FTYP 3) for object angles",
+                                path="FTYP")
+            got = heights(_fill(angles, live, t1))
+            y1 = [got[i] - targets[i] for i in live]
+        if any(abs(e) > 1e-9 * max(1.0, targets[i]) for e, i in zip(y1, live, strict=True)):
+            raise SpecError("could not solve the real image height fields (FTYP 3) for object angles", path="FTYP")
+        angles = _fill(angles, live, t1)
+    a_top = max(angles)
+    warnings.append("real image height fields (FTYP 3) converted to object angles (" + ", ".join(
+        f"{a:.6f}°" for a in angles) + "): the real chief rays land on the given heights")
+    out = {"hfov_deg": a_top if a_top > 0 else 1.0, "relative": [a / a_top if a_top > 0 else 0.0 for a in angles]}
+    if "weights" in fld:
+        out["weights"] = fld["weights"]
+    return out
+
+
+def _fill(base: list[float], idx: list[int], values: list[float]) -> list[float]:
+    out = list(base)
+    for i, v in zip(idx, values, strict=True):
+        out[i] = v
+    return out
 
 
 def _vignetting(zf: Any, n: int, warnings: list[str]) -> dict[str, list[float]] | None:
