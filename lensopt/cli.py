@@ -91,7 +91,9 @@ def print_json(obj: Any) -> None:
 @app.command()
 @handle_errors
 def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None, seed: SeedOpt = 0,
-          as_json: JsonOpt = False, aim_steps: AimStepsOpt = None) -> None:
+          as_json: JsonOpt = False, aim_steps: AimStepsOpt = None,
+          mtf: Annotated[str | None, typer.Option("--mtf", help="Also MTF at these cycles/mm (comma-separated; "
+                                                  "in --json as mtf).")] = None) -> None:
     """First-order data, RMS spot radius per field and wavelength, ray failures, distortion and
     relative illumination per field."""
     from lensopt.analysis.report import trace_report
@@ -99,6 +101,10 @@ def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None,
     model = load_model(lens)
     report = trace_report(model, PupilSampling.parse(sampling, seed=seed, path="--sampling"),
                           aim=check_aim(aim), aim_steps=check_aim_steps(aim_steps))
+    if mtf is not None:
+        from lensopt.cli_tolerance import mtf_report, parse_frequencies
+
+        report["mtf"] = mtf_report(model, parse_frequencies(mtf, "--mtf"))
     if as_json:
         print_json(report)
         return
@@ -532,6 +538,10 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
     save_figure(field_figure(summary, title=title, subtitle=sub), out, dpi=dpi)
     err_console.print(f"wrote {output}")
 
+
+from lensopt.cli_tolerance import register as _register_tolerance  # noqa: E402
+
+_register_tolerance(app, plot_app)
 
 from lensopt.cli_zemax import register as _register_zemax  # noqa: E402
 

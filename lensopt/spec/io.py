@@ -20,7 +20,7 @@ from lensopt.io.files import write_text_atomic
 from lensopt.spec import models
 from lensopt.spec.models import LensSpec
 
-__all__ = ["load_spec", "parse_spec", "dump_json", "save_json", "format_loc"]
+__all__ = ["load_spec", "parse_spec", "dump_json", "save_json", "format_loc", "load_tolerances"]
 
 
 def load_spec(path: str | Path) -> LensSpec:
@@ -178,3 +178,25 @@ def _to_spec_error(err: ValidationError) -> SpecError:
     if extra > 0:
         msg += f" [+{extra} more]"
     return SpecError(msg, path=loc or "spec", got=got)
+
+
+def load_tolerances(path: str | Path) -> Any:
+    """Read a ``--tolerances`` TOML file: a ``[tolerance]`` table (or its keys at the top level) →
+    ``ToleranceSpec``; errors name ``tolerance.<field>``."""
+    from lensopt.spec.tolerance import ToleranceSpec
+
+    path = Path(path)
+    if not path.is_file():
+        raise SpecError("no such file", path=str(path))
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise SpecError(f"malformed TOML: {err}", path=str(path)) from None
+    data = data.get("tolerance", data)
+    try:
+        return ToleranceSpec.model_validate(data)
+    except ValidationError as err:
+        first = err.errors()[0]
+        where = format_loc(tuple(first["loc"]))
+        raise SpecError(first["msg"], path="tolerance" + (f".{where}" if where else ""),
+                        got=first.get("input")) from None

@@ -14,6 +14,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from lensopt.spec.optim import OptimizeSpec
+from lensopt.spec.tolerance import ToleranceSpec
 
 __all__ = [
     "ApertureSpec",
@@ -39,6 +40,7 @@ __all__ = [
     "DiffractiveSurface",
     "SurfaceSpec",
     "ImageSpec",
+    "ElementPlacementSpec",
     "LensSpec",
     "curvature_of",
 ]
@@ -351,6 +353,10 @@ class _Interface(_Model):
     clip: bool = False
     vary: list[str] = Field(default_factory=list)
     label: str | None = None
+    # Placement (lensopt.optics.placement); None = on the axis (kept out of the written JSON).
+    decenter: tuple[float, float] | None = None  # (dx, dy), mm
+    tilt_deg: tuple[float, float] | None = None  # (α about x, β about the new y), degrees
+    decenter_mode: Literal["return", "basic"] | None = None  # None: "return" (decenter-and-return)
 
     def _allowed_vary(self) -> set[str]:
         return {"thickness", "material"}
@@ -423,6 +429,23 @@ SurfaceSpec = Annotated[
 ]
 
 
+class ElementPlacementSpec(_Model):
+    """A rigid decenter (mm) and tilt (degrees: α about x, then β about the new y) of the element made of
+    surfaces ``surfaces[0]..surfaces[1]`` (0-based, inclusive), about the vertex of its first surface;
+    later surfaces stay in place (see ``lensopt.optics.placement``)."""
+
+    surfaces: tuple[int, int]
+    decenter: tuple[float, float] = (0.0, 0.0)
+    tilt_deg: tuple[float, float] = (0.0, 0.0)
+
+    @field_validator("surfaces")
+    @classmethod
+    def _order(cls, v: tuple[int, int]) -> tuple[int, int]:
+        if v[0] < 0 or v[1] < v[0]:
+            raise ValueError(f"must be [first, last] surface indices with 0 ≤ first ≤ last (got {list(v)})")
+        return v
+
+
 class ImageSpec(_Model):
     """The flat image surface after the last gap; ``defocus`` (mm) moves it along the axis."""
 
@@ -439,7 +462,9 @@ class LensSpec(_Model):
     sensor: SensorSpec | None = None
     surfaces: list[SurfaceSpec] = Field(min_length=1)
     image: ImageSpec = Field(default_factory=ImageSpec)
+    elements: list[ElementPlacementSpec] | None = None
     optimize: OptimizeSpec | None = None
+    tolerance: ToleranceSpec | None = None
 
     @model_validator(mode="after")
     def _structure(self) -> LensSpec:
@@ -449,6 +474,10 @@ class LensSpec(_Model):
         if len(stops) > 1:
             raise ValueError(f"@surfaces[{stops[1]}].stop: stop = true on several surfaces {stops}; "
                              "exactly one is the aperture stop")
+        for i, el in enumerate(self.elements or []):
+            if el.surfaces[1] >= len(self.surfaces):
+                raise ValueError(f"@elements[{i}].surfaces: last surface {el.surfaces[1]} is beyond the "
+                                 f"{len(self.surfaces)} surfaces")
         return self
 
     @property
