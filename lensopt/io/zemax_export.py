@@ -102,9 +102,23 @@ def export_zemax(spec: LensSpec) -> str:
              "  DISZ " + ("INFINITY" if obj == "infinity" else _num(obj.distance))]
     surf_extras: dict[str, Any] = {}
     last = len(spec.surfaces) - 1
+    if spec.elements:
+        raise SpecError("element decenters/tilts ([[elements]]) have no export to Zemax yet", path="elements")
+    number = 0
     for i, surf in enumerate(spec.surfaces):
         thickness = surf.thickness + (spec.image.defocus if i == last else 0.0)
-        body += _surface(surf, i, thickness, glass_lines[i])
+        moved = any(surf.decenter or (0.0,)) or any(surf.tilt_deg or (0.0,))
+        if moved and surf.decenter_mode != "basic":
+            raise SpecError("a decenter-and-return surface has no Zemax export yet (basic decenters are written "
+                            "as coordinate breaks)", path=f"surfaces[{i}].decenter_mode")
+        if moved:  # a coordinate break right before the surface: Zemax's basic decenter/tilt
+            number += 1
+            dx, dy = surf.decenter or (0.0, 0.0)
+            ax, ay = surf.tilt_deg or (0.0, 0.0)
+            body += [f"SURF {number}", "  TYPE COORDBRK", "  CURV 0", f"  PARM 1 {_num(dx)}", f"  PARM 2 {_num(dy)}",
+                     f"  PARM 3 {_num(ax)}", f"  PARM 4 {_num(ay)}", "  PARM 5 0", "  PARM 6 0", "  DISZ 0"]
+        number += 1
+        body += _surface(surf, number - 1, thickness, glass_lines[i], path=f"surfaces[{i}]")
         extra: dict[str, Any] = {}
         if surf.vary:
             extra["vary"] = list(surf.vary)
@@ -116,7 +130,7 @@ def export_zemax(spec: LensSpec) -> str:
             extra["design_wavelength_nm"] = surf.design_wavelength_nm
         if extra:
             surf_extras[str(i + 1)] = extra
-    body += [f"SURF {len(spec.surfaces) + 1}", "  TYPE STANDARD", "  CURV 0", "  DISZ 0"]
+    body += [f"SURF {number + 1}", "  TYPE STANDARD", "  CURV 0", "  DISZ 0"]
     if surf_extras:
         extras["surfaces"] = surf_extras
     notes = [f"NOTE 0 {NOTE_PREFIX} " + json.dumps({k: v}, separators=(",", ":")) for k, v in extras.items()]
@@ -155,8 +169,8 @@ def _glasses(spec: LensSpec, model: Any) -> tuple[list[str], list[str]]:
     return out, gcat
 
 
-def _surface(surf: Any, i: int, thickness: float, glass: str) -> list[str]:
-    path = f"surfaces[{i}]"
+def _surface(surf: Any, i: int, thickness: float, glass: str, *, path: str) -> list[str]:
+    """The SURF block of ``surf``, numbered i + 1; errors name the spec ``path``."""
     base = surf.base if isinstance(surf, DiffractiveSurface) else surf
     radius = getattr(base, "radius", math.inf)
     curv = 0.0 if math.isinf(radius) else 1.0 / radius

@@ -296,12 +296,34 @@ def _extras(zf: ZFile, warnings: list[str]) -> dict[str, Any]:
 # ---------------------------------------------------------------------------------------- surfaces
 
 
-def coordinate_break(zf: ZFile, s: ZSurface) -> None:
-    """The single hook for ``COORDBRK`` surfaces: lensopt has no decentered/tilted surfaces yet, so a
-    coordinate break that moves anything is refused; one with all parameters zero is a plain gap."""
-    if any(v != 0 for k, v in s.parm.items() if 1 <= k <= 5):
-        raise SpecError(f"line {s.line}: surface {s.number} is a coordinate break (COORDBRK) with decenters/"
-                        "tilts; lensopt cannot import decentered or tilted systems yet", path=zf.source)
+def coordinate_break(zf: ZFile, s: ZSurface, medium: Any, scale: float) -> dict[str, Any] | None:
+    """The single hook for ``COORDBRK`` surfaces: None for a break that moves nothing (its thickness is
+    added to the previous gap), else a dummy plane surface in the current medium that carries the break
+    as lensopt's ``basic`` decenter/tilt (the axis follows, as in Zemax) and the break's thickness.
+
+    Zemax: ``PARM 1``/``2`` decenter x/y, ``PARM 3``/``4``/``5`` tilt about x/y/z (degrees), ``PARM 6``
+    order flag (0: decenter, then tilt x, then about the new y, then z). lensopt's placement is the same
+    (decenter, then α about x, then β about the new y); a tilt about z, and order flag 1 with both a
+    decenter and a tilt, are refused.
+    """
+    dx, dy, ax, ay, az = (s.parm.get(k, 0.0) for k in range(1, 6))
+    order = s.parm.get(6, 0.0)
+    where = f"line {s.line}: surface {s.number} (COORDBRK)"
+    if az != 0:
+        raise SpecError(f"{where}: a tilt about z ({az:g}°) is not supported (lensopt tilts about x and y)",
+                        path=zf.source)
+    if order != 0 and (dx or dy) and (ax or ay):
+        raise SpecError(f"{where}: order flag {order:g} (tilt before decenter) with both a decenter and a tilt "
+                        "is not supported", path=zf.source)
+    if not (dx or dy or ax or ay):
+        return None
+    surf: dict[str, Any] = {"type": "plane", "thickness": s.thickness * scale, "material": medium,
+                            "decenter_mode": "basic", "label": s.comment or f"COORDBRK {s.number}"}
+    if dx or dy:
+        surf["decenter"] = [dx * scale, dy * scale]
+    if ax or ay:
+        surf["tilt_deg"] = [ax, ay]
+    return surf
 
 
 def _lens_surfaces(zf: ZFile, catalogs: Any, extras: dict[str, Any], warnings: list[str]) -> list[dict[str, Any]]:
@@ -310,21 +332,25 @@ def _lens_surfaces(zf: ZFile, catalogs: Any, extras: dict[str, Any], warnings: l
     surf_extras = extras.get("surfaces") if isinstance(extras.get("surfaces"), dict) else {}
     gcat = [t.upper() for _, tokens in zf.system.get("GCAT", []) for t in tokens[1:]]
     out: list[dict[str, Any]] = []
-    pending_gap = 0.0  # thickness of coordinate breaks folded into the previous surface
     lens = zf.surfaces[1:-1]
     if not any(s.stop for s in lens):
         warnings.append("no STOP in the file: surface 1 is taken as the aperture stop (Zemax's default)")
     for s in lens:
         if s.type == "COORDBRK":
-            coordinate_break(zf, s)
-            warnings.append(f"surface {s.number}: coordinate break with zero decenters and tilts imported as a "
-                            "plain gap")
             if s.stop:
                 raise SpecError(f"line {s.line}: the stop is on a coordinate break", path=src)
-            if out:
-                out[-1]["thickness"] += s.thickness * scale
-            else:
-                pending_gap += s.thickness * scale
+            medium = out[-1]["material"] if out else "air"
+            dummy = coordinate_break(zf, s, medium, scale)
+            if dummy is None and not out:  # before the first surface: keep its gap as a dummy plane
+                dummy = {"type": "plane", "thickness": s.thickness * scale, "material": "air"}
+            if dummy is not None:
+                warnings.append(f"surface {s.number}: coordinate break imported as a dummy plane surface with a "
+                                "basic decenter/tilt (the axis follows)")
+                out.append(dummy)
+                continue
+            warnings.append(f"surface {s.number}: coordinate break with zero decenters and tilts imported as a "
+                            "plain gap")
+            out[-1]["thickness"] += s.thickness * scale
             continue
         i = len(out)
         extra = surf_extras.get(str(i + 1), {}) if isinstance(surf_extras, dict) else {}
@@ -334,9 +360,6 @@ def _lens_surfaces(zf: ZFile, catalogs: Any, extras: dict[str, Any], warnings: l
         out.append(surf)
         for item in s.ignored:
             warnings.append(f"surface {s.number}: ignored {item}")
-    if pending_gap:
-        raise SpecError("a coordinate break before the first surface changes the object distance; not supported",
-                        path=src)
     if not out:
         raise SpecError("no lens surfaces between the object and the image", path=src)
     return out

@@ -83,9 +83,9 @@ def test_unknown_glass_without_catalog_is_refused() -> None:
 def test_mirror_and_coordinate_break_are_refused() -> None:
     with pytest.raises(SpecError, match="mirror"):
         import_zemax(_edit("GLAS N-SF2 1 0 1.6476432085037231 33.838470458984375", "GLAS MIRROR 0 0"))
-    text = _edit("SURF 5\n  STOP", "SURF 5\n  TYPE COORDBRK\n  PARM 3 5.0\n  DISZ 0\nSURF 6\n  STOP")
+    text = _edit("SURF 5\n  STOP", "SURF 5\n  TYPE COORDBRK\n  PARM 5 5.0\n  DISZ 0\nSURF 6\n  STOP")
     text = text.replace("SURF 6\n  TYPE STANDARD\n  CURV 0.039", "SURF 7\n  TYPE STANDARD\n  CURV 0.039")
-    with pytest.raises(SpecError, match="coordinate break"):
+    with pytest.raises(SpecError, match="COORDBRK.*tilt about z"):
         import_zemax(text)
 
 
