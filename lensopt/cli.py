@@ -562,5 +562,9 @@ from lensopt.cli_tolerance import register as _register_tolerance  # noqa: E402
 
 _register_tolerance(app, plot_app)
 
+from lensopt.cli_zemax import register as _register_zemax  # noqa: E402
+
+_register_zemax(app)
+
 if __name__ == "__main__":  # pragma: no cover
     app()

@@ -83,7 +83,7 @@ def format_loc(loc: tuple[Any, ...]) -> str:
 
 
 _UNION_TAGS = {"plane", "sphere", "conic", "asphere", "diffractive", "str", "ModelGlassSpec", "TabulatedGlassSpec",
-               "ObjectSpec"}
+               "AgfGlassSpec", "ObjectSpec"}
 
 #: What a value of a union field may be, for values that fit none of the alternatives.
 _UNION_HINTS = {
@@ -122,7 +122,8 @@ def _drop_other_alternative(real: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """A material table is tried as a model glass, then as a tabulated glass: when one alternative has a
     real complaint, the other alternative's missing or unknown fields are noise, not further errors."""
     def in_union(e: dict[str, Any]) -> bool:
-        return any("ModelGlassSpec" in str(p) or "TabulatedGlassSpec" in str(p) for p in e["loc"])
+        return any(any(k in str(p) for k in ("ModelGlassSpec", "TabulatedGlassSpec", "AgfGlassSpec"))
+                   for p in e["loc"])
 
     if any(in_union(e) and e["type"] not in ("missing", "extra_forbidden") for e in real):
         return [e for e in real if not (in_union(e) and e["type"] in ("missing", "extra_forbidden"))]

@@ -27,6 +27,7 @@ __all__ = [
     "SensorSpec",
     "ModelGlassSpec",
     "TabulatedGlassSpec",
+    "AgfGlassSpec",
     "PlaneShape",
     "SphereShape",
     "ConicShape",
@@ -260,7 +261,17 @@ class TabulatedGlassSpec(_Model):
         return self
 
 
-MaterialSpec = Annotated[str | ModelGlassSpec | TabulatedGlassSpec, Field(union_mode="left_to_right")]
+class AgfGlassSpec(_Model):
+    """A glass of a Zemax AGF catalog file: ``{ catalog = "path/to/file.agf", glass = "N-BK7" }``. A relative
+    path is taken from the working directory. Wavelengths outside the catalog's range are accepted (the
+    formula extrapolates); ``lensopt import-zemax`` warns about them."""
+
+    catalog: str = Field(min_length=1)
+    glass: str = Field(min_length=1)
+
+
+MaterialSpec = Annotated[str | ModelGlassSpec | TabulatedGlassSpec | AgfGlassSpec,
+                         Field(union_mode="left_to_right")]
 
 
 # ------------------------------------------------------------------------------- surface shapes
