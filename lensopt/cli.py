@@ -5,68 +5,80 @@ Every ``LensoptError`` becomes one line on stderr and exit code 2 (DESIGN.md rul
 
 from __future__ import annotations
 
-import functools
 import json
 import logging
 import math
 import sys
-from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
-from rich.console import Console
-from rich.logging import RichHandler
-from rich.table import Table
 
+from lensopt import __version__
+from lensopt.cli_common import (  # noqa: F401  (re-exported: commands of other modules import them from here)
+    AimOpt,
+    AimStepsOpt,
+    JsonOpt,
+    LensArg,
+    LensoptGroup,
+    SamplingOpt,
+    SeedOpt,
+    check_output,
+    console,
+    err_console,
+    handle_errors,
+    state,
+)
 from lensopt.errors import LensoptError
-from lensopt.optics.sampling import PupilSampling
-from lensopt.spec import Model, build, load_spec
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+if TYPE_CHECKING:
+    from rich.table import Table
+
+    from lensopt.spec import Model
+
+app = typer.Typer(cls=LensoptGroup, add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Differentiable lens design: trace, plot, optimize, simulate, export.")
-plot_app = typer.Typer(no_args_is_help=True, help="Figures: layout, ray fans, spot diagrams, PSFs.")
+plot_app = typer.Typer(no_args_is_help=True, help="Figures: layout, ray fans, spot diagrams, PSFs, field curves.")
 app.add_typer(plot_app, name="plot")
 
-# Wide enough for the tables when stdout is a pipe or a file (rich would assume 80 columns).
-console = Console(width=None if sys.stdout.isatty() else 160)
-err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 1000)
-F = TypeVar("F", bound=Callable[..., Any])
 
-LensArg = Annotated[Path, typer.Argument(help="Lens spec (.toml) or resolved lens (.json).")]
-SamplingOpt = Annotated[str, typer.Option("--sampling", help="Pupil sampling: rings:N[:nojitter] or grid:N.")]
-AimOpt = Annotated[str | None, typer.Option("--aim", help="Ray aiming: none | chief | full (default: the spec's).")]
-AimStepsOpt = Annotated[int | None, typer.Option("--aim-steps",
-                                                 help="Newton steps of full aiming (default: the spec's).")]
-SeedOpt = Annotated[int, typer.Option("--seed", help="Seed of every random draw (pupil jitter).")]
-JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object instead of tables.")]
-
-
-def handle_errors(fn: F) -> F:
-    """Turn lensopt errors into one line and exit code 2; Ctrl-C into exit code 130."""
-
-    @functools.wraps(fn)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return fn(*args, **kwargs)
-        except LensoptError as err:
-            err_console.print(f"[bold red]error:[/] {err}", markup=True, highlight=False, soft_wrap=True)
-            raise typer.Exit(2) from None
-        except KeyboardInterrupt:
-            err_console.print("interrupted")
-            raise typer.Exit(130) from None
-
-    return wrapper  # type: ignore[return-value]
+def _version(value: bool) -> None:
+    if value:
+        sys.stdout.write(f"lensopt {__version__}\n")
+        raise typer.Exit(0)
 
 
 @app.callback()
-def main(verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Debug logging.")] = False) -> None:
+def main(verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Debug logging; tracebacks of bugs.")] = False,
+         max_memory: Annotated[str | None, typer.Option(
+             "--max-memory", help="Memory budget, e.g. 4G (default: half the machine's memory).")] = None,
+         version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True,
+                                               help="Print the version and exit.")] = False) -> None:
+    from rich.logging import RichHandler
+
+    from lensopt import resources
+
+    state.verbose = verbose
+    resources.set_budget(None)
+    if max_memory is not None:
+        try:
+            resources.set_budget(resources.parse_size(max_memory))
+        except LensoptError as err:
+            raise typer.BadParameter(err.message + f" (got {max_memory!r})", param_hint="'--max-memory'") from None
     logging.basicConfig(level=logging.DEBUG if verbose else logging.WARNING, format="%(message)s",
-                        handlers=[RichHandler(console=err_console, show_path=False)])
+                        handlers=[RichHandler(console=err_console._get(), show_path=False)])
 
 
 def load_model(path: Path) -> Model:
+    from lensopt.spec import build, load_spec
+
     return build(load_spec(path))
+
+
+def parse_sampling(text: str, seed: int, option: str = "--sampling"):  # noqa: ANN201
+    from lensopt.optics.sampling import PupilSampling
+
+    return PupilSampling.parse(text, seed=seed, path=option)
 
 
 def check_aim(aim: str | None) -> str | None:
@@ -79,6 +91,12 @@ def check_aim_steps(steps: int | None) -> int | None:
     if steps is not None and not 1 <= steps <= 100:
         raise LensoptError("must be an integer from 1 to 100", path="--aim-steps", got=steps)
     return steps
+
+
+def _table(*args: Any, **kwargs: Any) -> Table:
+    from rich.table import Table
+
+    return Table(*args, **kwargs)
 
 
 def print_json(obj: Any) -> None:
@@ -97,7 +115,7 @@ def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None,
     from lensopt.analysis.report import trace_report
 
     model = load_model(lens)
-    report = trace_report(model, PupilSampling.parse(sampling, seed=seed, path="--sampling"),
+    report = trace_report(model, parse_sampling(sampling, seed),
                           aim=check_aim(aim), aim_steps=check_aim_steps(aim_steps))
     if as_json:
         print_json(report)
@@ -111,7 +129,7 @@ def _render_trace(r: dict[str, Any]) -> None:
     console.print(f"[bold]{r['name']}[/]")
     console.print(_prescription_table(r["surfaces"], ref, r["reference_nm"]))
     fo = r["first_order"]
-    t = Table(title=f"first-order data ({r['reference_nm']:g} nm)", title_justify="left")
+    t = _table(title=f"first-order data ({r['reference_nm']:g} nm)", title_justify="left")
     t.add_column("quantity")
     t.add_column("value", justify="right")
     t.add_column("unit")
@@ -124,7 +142,7 @@ def _render_trace(r: dict[str, Any]) -> None:
         t.add_row(label, f"{fo[key]:.6f}", "" if "fnumber" in key else "mm")
     console.print(t)
     wl = r["wavelengths_nm"]
-    s = Table(title=f"RMS spot radius (µm), sampling {r['sampling']}, aim {r['aim']}", title_justify="left")
+    s = _table(title=f"RMS spot radius (µm), sampling {r['sampling']}, aim {r['aim']}", title_justify="left")
     s.add_column("field °", justify="right")
     for w in wl:
         s.add_column(f"{w:g} nm", justify="right")
@@ -159,7 +177,7 @@ def _render_field(r: dict[str, Any]) -> None:
     from lensopt.analysis.field import AIM_NOTE_FRACTION
 
     full = r["aim"] == "full"
-    t = Table(title=f"Distortion, relative illumination, pupil (V factors at {r['reference_nm']:g} nm)"
+    t = _table(title=f"Distortion, relative illumination, pupil (V factors at {r['reference_nm']:g} nm)"
                     + (f", full aiming {r['aim_steps']} step(s), stop radius {r['stop_radius_mm']:.6f} mm"
                        if full else ""))
     for col in ("field °", "distortion %", "RI S51", "RI S52", "V_i", "V_s", "V_l"):
@@ -183,7 +201,7 @@ def _render_field(r: dict[str, Any]) -> None:
 
 def _prescription_table(surfaces: list[dict[str, Any]], ref: int, ref_nm: float) -> Table:
     """The resolved prescription as traced: one row per surface (the ``surfaces`` of ``trace --json``)."""
-    t = Table(title="prescription (lengths in mm)", title_justify="left")
+    t = _table(title="prescription (lengths in mm)", title_justify="left")
     for col, just in (("surf", "right"), ("type", "left"), ("radius", "right"), ("thickness", "right"),
                       ("material", "left"), (f"n {ref_nm:g} nm", "right"), ("semi-diam.", "right"),
                       ("notes", "left")):
@@ -236,7 +254,7 @@ def ray(
     if as_json:
         print_json(r)
         return
-    t = Table(title=f"real ray: field {field:g}°, pupil ({r['pupil'][0]:g}, {r['pupil'][1]:.6g}), "
+    t = _table(title=f"real ray: field {field:g}°, pupil ({r['pupil'][0]:g}, {r['pupil'][1]:.6g}), "
                     f"{wavelength:g} nm, aim {r['aim']}")
     for col in ("surf", "x", "y", "z", "L", "M", "N", "AOI °", "AOR °"):
         t.add_column(col, justify="right")
@@ -268,11 +286,11 @@ def _titles(model: Model) -> tuple[str, str]:
     return model.spec.name, f"EFL {float(fo.efl):.3f} mm · f/{float(fo.fnumber):.2f} · {field} · {wl} nm"
 
 
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg")
+
+
 def _check_output(path: Path) -> Path:
-    if path.suffix.lower() not in (".png", ".pdf", ".svg", ".jpg", ".jpeg"):
-        raise LensoptError("expected an image file name ending in .png, .pdf, .svg or .jpg",
-                           path="--output", got=str(path))
-    return path
+    return check_output(path, FIGURE_SUFFIXES, what="image file")
 
 
 @plot_app.command("layout")
@@ -326,7 +344,7 @@ def plot_spots_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
 
     out = _check_output(output)
     model = load_model(lens)
-    pupil = PupilSampling.parse(sampling, seed=seed, path="--sampling")
+    pupil = parse_sampling(sampling, seed)
     with torch.no_grad():
         spots = spot_diagram(model.lens, model.system, pupil, aim=check_aim(aim))
     title, sub = _titles(model)
@@ -349,7 +367,9 @@ def export_codev(
 ) -> None:
     """Write the lens as a CODE V sequence file (.seq)."""
     from lensopt.io.codev_export import write_codev
+    from lensopt.spec import load_spec
 
+    check_output(output, (".seq",), what="CODE V sequence file")
     write_codev(load_spec(lens), output, private_catalog=private_catalog)
     err_console.print(f"wrote {output}", highlight=False)
 
@@ -367,6 +387,7 @@ def import_codev(
     if output.suffix.lower() != ".json":
         raise LensoptError("the imported lens is written as JSON; name it *.json", path="--output",
                            got=str(output))
+    check_output(output)
     result = read_codev(seq)
     for warning in result.warnings:
         err_console.print(f"[yellow]warning:[/] {warning}", markup=True, highlight=False, soft_wrap=True)
@@ -390,13 +411,15 @@ def optimize(
     """Levenberg–Marquardt (or Adam) for spot size with solves and constraints; Ctrl-C keeps the best lens."""
     from lensopt.analysis.report import trace_report
     from lensopt.cli_optimize import LiveProgress, render_summary, summary
+    from lensopt.optics.sampling import PupilSampling
     from lensopt.optim import Problem
     from lensopt.optim import optimize as run_optimize
     from lensopt.optim.report import constraint_report
-    from lensopt.spec import save_json
+    from lensopt.spec import build, load_spec, save_json
 
     if output.suffix.lower() != ".json":
         raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
+    check_output(output)
     start_spec = load_spec(spec)
     with LiveProgress(err_console, enabled=not quiet) as live:
         result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live)
@@ -441,6 +464,8 @@ def simulate(
 
     if not plan_only and output is None:
         raise LensoptError("needed unless --plan", path="--output")
+    if output is not None:
+        check_output(output, (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr"), what="image file")
     if not 0.0 <= overlap < 1.0:
         raise LensoptError("must lie in [0, 1)", path="--overlap", got=overlap)
     result = run_simulate(load_model(lens), image, output, region=region, effects=effects, reference=reference,
@@ -453,7 +478,7 @@ def simulate(
 
 
 def _render_plan(p: dict[str, Any]) -> None:
-    t = Table(title=f"plan — {p['lens']}: {p['image']['width']}×{p['image']['height']} "
+    t = _table(title=f"plan — {p['lens']}: {p['image']['width']}×{p['image']['height']} "
                     f"{'/'.join(p['channels'])} ({p['image']['encoding']}) on region {p['region']['name']} "
                     f"({p['region']['w']:.0f}×{p['region']['h']:.0f} sensor px, image pixel {p['pixel_um']:.2f} µm)",
               show_header=False)
@@ -472,7 +497,7 @@ def _render_plan(p: dict[str, Any]) -> None:
 
 
 def _render_run(r: dict[str, Any]) -> None:
-    t = Table(title="stages")
+    t = _table(title="stages")
     t.add_column("stage")
     t.add_column("s", justify="right")
     for k, v in r["timings"].items():
@@ -481,7 +506,7 @@ def _render_run(r: dict[str, Any]) -> None:
     m = r.get("metrics")
     if m:
         console.print(f"vs {m['against']}: PSNR {m['psnr_db']:.2f} dB, SSIM {m['ssim']:.4f} ({m['space']})")
-    console.print(f"wrote {r['output']} ({r['output_encoding']}; input {r['input_encoding']})")
+    err_console.print(f"wrote {r['output']} ({r['output_encoding']}; input {r['input_encoding']})", highlight=False)
 
 
 # ------------------------------------------------------------------------------------- plot psf
@@ -503,9 +528,10 @@ def plot_psf(
     """RGB PSFs across the field (the spec's fields)."""
     from lensopt.imaging.commands import plot_psfs
 
+    check_output(output, (".png", ".pdf", ".svg"), what="image file")
     plot_psfs(load_model(lens), output, sampling=rays, kernel=kernel, diffraction=diffraction, pitch_um=pitch_um,
               sqrt=sqrt, seed=seed)
-    console.print(f"wrote {output}")
+    err_console.print(f"wrote {output}", highlight=False)
 
 
 # ------------------------------------------------------------------------------------ plot field
@@ -525,7 +551,7 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
 
     out = _check_output(output)
     model = load_model(lens)
-    summary = field_summary(model.lens, model.system, PupilSampling.parse(sampling, seed=seed, path="--sampling"),
+    summary = field_summary(model.lens, model.system, parse_sampling(sampling, seed),
                             rel_field=[i / (points - 1) for i in range(points)], aim=check_aim(aim),
                             aim_steps=check_aim_steps(aim_steps))
     title, sub = _titles(model)
