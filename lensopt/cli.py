@@ -151,11 +151,14 @@ def _render_trace(r: dict[str, Any]) -> None:
     s.add_column("chief y mm", justify="right")
     s.add_column("failed", justify="right")
     for f in r["fields"]:
-        s.add_row(f"{f['angle_deg']:.3f}", *[f"{v:.4f}" for v in f["rms_spot_radius_um"]],
-                  f"{f['rms_spot_radius_weighted_um']:.4f}", f"{f['centroid_y_mm']:.6f}",
-                  f"{f['chief_ray_y_mm']:.6f}", f"{f['failed_rays']}/{f['rays']}")
+        s.add_row(f"{f['angle_deg']:.3f}", *[_num(v) for v in f["rms_spot_radius_um"]],
+                  _num(f["rms_spot_radius_weighted_um"]), _num(f["centroid_y_mm"], ".6f"),
+                  _num(f["chief_ray_y_mm"], ".6f"), f"{f['failed_rays']}/{f['rays']}")
     console.print(s)
-    console.print(f"effective spot radius: [bold]{r['effective_spot_radius_um']:.4f} µm[/]")
+    esr = r["effective_spot_radius_um"]
+    console.print(f"effective spot radius: [bold]{esr:.4f} µm[/]" if esr is not None else
+                  "effective spot radius: — (no ray reaches the image at some field or wavelength: see the "
+                  "failures below)")
     failures: dict[str, int] = {}
     for f in r["fields"]:
         for reason, n in f["failures"].items():
@@ -259,13 +262,14 @@ def ray(
     for col in ("surf", "x", "y", "z", "L", "M", "N", "AOI °", "AOR °"):
         t.add_column(col, justify="right")
     for s in r["surfaces"]:
-        aor = "TIR" if s["aor_deg"] is None else f"{s['aor_deg']:.4f}"
-        t.add_row(str(s["surface"]), *[f"{s[k]:.6f}" for k in ("x", "y", "z", "L", "M", "N")],
-                  f"{s['aoi_deg']:.4f}", aor)
+        aor = "TIR" if s["aor_deg"] is None and s["aoi_deg"] is not None else _num(s["aor_deg"])
+        t.add_row(str(s["surface"]), *[_num(s[k], ".6f") for k in ("x", "y", "z", "L", "M", "N")],
+                  _num(s["aoi_deg"]), aor)
     im = r["image"]
-    t.add_row("image", *[f"{im[k]:.6f}" for k in ("x", "y", "z", "L", "M", "N")], "", "")
+    t.add_row("image", *[_num(im[k], ".6f") for k in ("x", "y", "z", "L", "M", "N")], "", "")
     console.print(t)
-    console.print(f"status: {r['status']}" + (" (backtracking flagged)" if r["backtracking"] else ""))
+    at = f" at surface {r['failed_at_surface']}" if r.get("failed_at_surface") else ""
+    console.print(f"status: {r['status']}{at}" + (" (backtracking flagged)" if r["backtracking"] else ""))
 
 
 # ------------------------------------------------------------------------------------------ plot

@@ -88,13 +88,17 @@ def summary(result: OptimizeResult, start: dict[str, Any], final: dict[str, Any]
     }
 
 
+def _um(v: float | None) -> str:
+    return "— (rays fail)" if v is None else f"{v:.4f} µm"
+
+
 def render_summary(console: Console, s: dict[str, Any]) -> None:
     """Final tables: spot size start → end, first-order data, constraint values, glasses."""
     fin, st = s["final"], s["start"]
     head = "interrupted — best lens so far" if s["interrupted"] else f"stopped: {s['stop_reason']}"
     console.print(f"[bold]{head}[/] after {s['steps']} steps, {s['elapsed_s']:.1f} s; written to {s['output']}")
-    console.print(f"effective spot radius ({fin['sampling']}): {st['effective_spot_radius_um']:.4f} µm → "
-                  f"[bold]{fin['effective_spot_radius_um']:.4f} µm[/]")
+    console.print(f"effective spot radius ({fin['sampling']}): {_um(st['effective_spot_radius_um'])} → "
+                  f"[bold]{_um(fin['effective_spot_radius_um'])}[/]")
     fo = fin["first_order"]
     console.print(f"EFL {fo['efl']:.6f} mm, f/{fo['fnumber']:.4f}, total track {fo['total_track']:.4f} mm, "
                   f"paraxial image height {fo['paraxial_image_height']:.4f} mm")
