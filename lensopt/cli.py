@@ -27,6 +27,8 @@ from lensopt.cli_common import (  # noqa: F401  (re-exported: commands of other 
     console,
     err_console,
     handle_errors,
+    report_signal,
+    signals_deferred,
     state,
 )
 from lensopt.errors import LensoptError
@@ -425,9 +427,16 @@ def optimize(
         raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
     check_output(output)
     start_spec = load_spec(spec)
-    with LiveProgress(err_console, enabled=not quiet) as live:
-        result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live)
-    save_json(result.spec, output)  # atomic
+    try:
+        with LiveProgress(err_console._get(), enabled=not quiet) as live:
+            result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live)
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the first step: the best lens is the start lens
+        with signals_deferred():
+            save_json(start_spec, output)
+        word = "terminated" if state.signal_exit == 143 else "interrupted"
+        raise typer.Exit(report_signal(f"{word} before the first step; wrote the start lens to {output}")) from None
+    with signals_deferred():  # a second signal waits until the file is complete
+        save_json(result.spec, output)  # atomic
     sampling = PupilSampling.parse("rings:24", seed=seed)
     final_problem = Problem(result.spec, seed=seed)
     s = summary(result, trace_report(build(start_spec), sampling), trace_report(build(result.spec), sampling),
@@ -436,8 +445,9 @@ def optimize(
         print_json(s)
     else:
         render_summary(console, s)
-    if result.interrupted:
-        raise typer.Exit(130)
+    if result.interrupted:  # the summary above says so
+        state.signal_reported = True
+        raise typer.Exit(state.signal_exit)
 
 
 # -------------------------------------------------------------------------------------- simulate

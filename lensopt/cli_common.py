@@ -31,7 +31,7 @@ from lensopt.errors import LensoptError
 
 __all__ = ["AimOpt", "AimStepsOpt", "EX_INTERNAL", "JsonOpt", "LensArg", "SamplingOpt", "SeedOpt",
            "Terminated", "check_output", "console", "err_console", "handle_errors", "LensoptGroup",
-           "signals_deferred", "state"]
+           "report_signal", "signals_deferred", "state"]
 
 EX_USAGE, EX_INTERNAL, EX_SIGINT, EX_SIGTERM = 2, 70, 130, 143
 F = TypeVar("F", bound=Callable[..., Any])
@@ -44,6 +44,7 @@ class Terminated(KeyboardInterrupt):
 class _State:
     verbose = False
     signal_exit = EX_SIGINT  # the exit code of the last signal received
+    signal_reported = False  # its one line is printed
 
 
 state = _State()
@@ -113,12 +114,8 @@ def handle_errors(fn: F) -> F:
         except LensoptError as err:
             error_line(str(err))
             raise typer.Exit(EX_USAGE) from None
-        except Terminated:
-            err_console.print("terminated", highlight=False)
-            raise typer.Exit(EX_SIGTERM) from None
         except KeyboardInterrupt:
-            err_console.print("interrupted", highlight=False)
-            raise typer.Exit(EX_SIGINT) from None
+            raise typer.Exit(report_signal()) from None
         except RecursionError:
             error_line("input nested too deeply")
             raise typer.Exit(EX_USAGE) from None
@@ -138,6 +135,15 @@ def handle_errors(fn: F) -> F:
 
 
 # ------------------------------------------------------------------------------------- signals
+
+
+def report_signal(line: str | None = None) -> int:
+    """Print the one line for the signal received (once) and return its exit code (130 or 143)."""
+    if not state.signal_reported:
+        state.signal_reported = True
+        text = line or ("terminated" if state.signal_exit == EX_SIGTERM else "interrupted")
+        err_console.print(text, highlight=False, markup=False, soft_wrap=True)
+    return state.signal_exit
 
 
 def _on_sigterm(signum: int, frame: Any) -> None:
@@ -186,10 +192,13 @@ class LensoptGroup(TyperGroup):
     def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
              standalone_mode: bool = True, **extra: Any) -> Any:
         code = 0
+        state.signal_exit, state.signal_reported, state.verbose = EX_SIGINT, False, False
         try:
             with _signal_handlers():
                 rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
             code = rv if isinstance(rv, int) else 0
+            if code == EX_SIGINT:  # typer turns a KeyboardInterrupt outside the commands into exit 130
+                code = report_signal()
         except getattr(click_exc, "NoArgsIsHelpError", ()) as err:
             err.show()
             code = err.exit_code
@@ -200,12 +209,8 @@ class LensoptGroup(TyperGroup):
                 hint = f" (see {ctx.command_path} --help)"
             error_line(err.format_message() + hint)
             code = err.exit_code
-        except Terminated:
-            err_console.print("terminated", highlight=False)
-            code = EX_SIGTERM
         except (KeyboardInterrupt, typer.Abort):
-            err_console.print("interrupted", highlight=False)
-            code = state.signal_exit if state.signal_exit == EX_SIGTERM else EX_SIGINT
+            code = report_signal()
         except typer.Exit as err:
             code = err.exit_code
         if not standalone_mode:
