@@ -39,8 +39,9 @@ if TYPE_CHECKING:
     from lensopt.spec import Model
 
 app = typer.Typer(cls=LensoptGroup, add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  rich_markup_mode=None,
                   help="Differentiable lens design: trace, plot, optimize, simulate, export.")
-plot_app = typer.Typer(no_args_is_help=True, help="Figures: layout, ray fans, spot diagrams, PSFs, field curves.")
+plot_app = typer.Typer(no_args_is_help=True, help="Figures: layout, fans, spots, PSFs, field curves.")
 app.add_typer(plot_app, name="plot")
 
 
@@ -108,7 +109,7 @@ def print_json(obj: Any) -> None:
 # ----------------------------------------------------------------------------------------- trace
 
 
-@app.command()
+@app.command(short_help="First-order data, spot sizes, failures, distortion, illumination.")
 @handle_errors
 def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None, seed: SeedOpt = 0,
           as_json: JsonOpt = False, aim_steps: AimStepsOpt = None) -> None:
@@ -232,7 +233,7 @@ def _prescription_table(surfaces: list[dict[str, Any]], ref: int, ref_nm: float)
 # ------------------------------------------------------------------------------------------- ray
 
 
-@app.command()
+@app.command(short_help="One real ray, surface by surface (like CODE V's RSI).")
 @handle_errors
 def ray(
     lens: LensArg,
@@ -299,7 +300,7 @@ def _check_output(path: Path) -> Path:
     return check_output(path, FIGURE_SUFFIXES, what="image file")
 
 
-@plot_app.command("layout")
+@plot_app.command("layout", short_help="2D meridional layout with traced rays.")
 @handle_errors
 def plot_layout_cmd(lens: LensArg, output: OutOpt, aim: AimOpt = None,
                     rays: Annotated[int, typer.Option("--rays", min=2, max=101,
@@ -317,7 +318,7 @@ def plot_layout_cmd(lens: LensArg, output: OutOpt, aim: AimOpt = None,
     err_console.print(f"wrote {output}")
 
 
-@plot_app.command("fans")
+@plot_app.command("fans", short_help="Tangential and sagittal ray fans.")
 @handle_errors
 def plot_fans_cmd(lens: LensArg, output: OutOpt, aim: AimOpt = None,
                   points: Annotated[int, typer.Option("--points", min=3, max=2001,
@@ -338,7 +339,7 @@ def plot_fans_cmd(lens: LensArg, output: OutOpt, aim: AimOpt = None,
     err_console.print(f"wrote {output}")
 
 
-@plot_app.command("spots")
+@plot_app.command("spots", short_help="Spot diagrams per field and wavelength.")
 @handle_errors
 def plot_spots_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings:24", aim: AimOpt = None,
                    seed: SeedOpt = 0, dpi: DpiOpt = 150) -> None:
@@ -403,10 +404,10 @@ def import_codev(
 # -------------------------------------------------------------------------------------- optimize
 
 
-@app.command()
+@app.command(short_help="Optimize a spec (LM or Adam); Ctrl-C or SIGTERM keeps the best lens.")
 @handle_errors
 def optimize(
-    spec: Annotated[Path, typer.Argument(help="Lens spec (.toml or .json) with vary lists and [optimize].")],
+    spec: Annotated[Path, typer.Argument(help="Lens spec (.toml or .json) with vary lists and an optimize section.")],
     output: Annotated[Path, typer.Option("--output", "-o", help="Where to write the optimized lens (.json).")],
     optimizer: Annotated[str | None, typer.Option("--optimizer", help="lm | adam (default: the spec's).")] = None,
     steps: Annotated[int | None, typer.Option("--steps", min=1, help="Steps (default: the spec's).")] = None,
@@ -453,7 +454,7 @@ def optimize(
 # -------------------------------------------------------------------------------------- simulate
 
 
-@app.command()
+@app.command(short_help="Simulate a scene image through the lens.")
 @handle_errors
 def simulate(
     lens: LensArg,
@@ -551,7 +552,7 @@ def plot_psf(
 # ------------------------------------------------------------------------------------ plot field
 
 
-@plot_app.command("field")
+@plot_app.command("field", short_help="Distortion and relative illumination against field.")
 @handle_errors
 def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings:16", aim: AimOpt = None,
                    aim_steps: AimStepsOpt = None,
