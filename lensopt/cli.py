@@ -69,7 +69,7 @@ def main(verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Debug lo
         except LensoptError as err:
             raise typer.BadParameter(err.message + f" (got {max_memory!r})", param_hint="'--max-memory'") from None
     logging.basicConfig(level=logging.DEBUG if verbose else logging.WARNING, format="%(message)s",
-                        handlers=[RichHandler(console=err_console._get(), show_path=False)])
+                        handlers=[RichHandler(console=err_console, show_path=False)])
 
 
 def load_model(path: Path) -> Model:
@@ -429,7 +429,7 @@ def optimize(
     check_output(output)
     start_spec = load_spec(spec)
     try:
-        with LiveProgress(err_console._get(), enabled=not quiet) as live:
+        with LiveProgress(err_console, enabled=not quiet) as live:
             result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live)
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the first step: the best lens is the start lens
         with signals_deferred():
@@ -475,7 +475,7 @@ def simulate(
     as_json: JsonOpt = False,
 ) -> None:
     """Simulate a scene through the lens, computing only the effects the scene calls for."""
-    from lensopt.imaging.commands import parse_grid, run_simulate
+    from lensopt.cli_imaging import parse_grid, run_simulate
 
     if not plan_only and output is None:
         raise LensoptError("needed unless --plan", path="--output")
@@ -541,7 +541,7 @@ def plot_psf(
     seed: SeedOpt = 0,
 ) -> None:
     """RGB PSFs across the field (the spec's fields)."""
-    from lensopt.imaging.commands import plot_psfs
+    from lensopt.cli_imaging import plot_psfs
 
     check_output(output, (".png", ".pdf", ".svg"), what="image file")
     plot_psfs(load_model(lens), output, sampling=rays, kernel=kernel, diffraction=diffraction, pitch_um=pitch_um,
@@ -573,6 +573,10 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
     save_figure(field_figure(summary, title=title, subtitle=sub), out, dpi=dpi)
     err_console.print(f"wrote {output}")
 
+
+from lensopt.cli_evaluate import register as _register_evaluate  # noqa: E402  (needs the app above)
+
+_register_evaluate(app)
 
 if __name__ == "__main__":  # pragma: no cover
     app()

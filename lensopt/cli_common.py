@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
 import typer
+from rich.console import Console
 from typer.core import TyperGroup
 
 try:  # typer ≥ 0.20 vendors click
@@ -50,29 +51,9 @@ class _State:
 state = _State()
 
 
-class _LazyConsole:
-    """A rich Console created on first use (importing rich's console costs startup time)."""
-
-    def __init__(self, stderr: bool) -> None:
-        self._stderr = stderr
-        self._console: Any = None
-
-    def _get(self) -> Any:
-        if self._console is None:
-            from rich.console import Console
-
-            stream = sys.stderr if self._stderr else sys.stdout
-            # Wide enough for tables when the stream is a pipe or a file (rich would assume 80 columns).
-            width = None if stream.isatty() else (1000 if self._stderr else 160)
-            self._console = Console(stderr=self._stderr, width=width)
-        return self._console
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._get(), name)
-
-
-console: Any = _LazyConsole(stderr=False)
-err_console: Any = _LazyConsole(stderr=True)
+# Wide enough for tables when the stream is a pipe or a file (rich would assume 80 columns).
+console = Console(width=None if sys.stdout.isatty() else 160)
+err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 1000)
 
 
 def _check_seed(value: int | None) -> int | None:
