@@ -5,7 +5,6 @@ Every ``LensoptError`` becomes one line on stderr and exit code 2 (DESIGN.md rul
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import sys
@@ -21,12 +20,14 @@ from lensopt.cli_common import (  # noqa: F401  (re-exported: commands of other 
     JsonOpt,
     LensArg,
     LensoptGroup,
+    LowerLevelFormatter,
     SamplingOpt,
     SeedOpt,
     check_output,
     console,
     err_console,
     handle_errors,
+    print_json,
     report_signal,
     signals_deferred,
     state,
@@ -57,8 +58,6 @@ def main(verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Debug lo
              "--max-memory", help="Memory budget, e.g. 4G (default: half the machine's memory).")] = None,
          version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True,
                                                help="Print the version and exit.")] = False) -> None:
-    from rich.logging import RichHandler
-
     from lensopt import resources
 
     state.verbose = verbose
@@ -68,8 +67,9 @@ def main(verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Debug lo
             resources.set_budget(resources.parse_size(max_memory))
         except LensoptError as err:
             raise typer.BadParameter(err.message + f" (got {max_memory!r})", param_hint="'--max-memory'") from None
-    logging.basicConfig(level=logging.DEBUG if verbose else logging.WARNING, format="%(message)s",
-                        handlers=[RichHandler(console=err_console, show_path=False)])
+    handler = logging.StreamHandler(sys.stderr)  # one plain line per message: "warning: ..."
+    handler.setFormatter(LowerLevelFormatter("%(levelname)s: %(message)s"))
+    logging.basicConfig(level=logging.DEBUG if verbose else logging.WARNING, handlers=[handler], force=True)
 
 
 def load_model(path: Path) -> Model:
@@ -100,10 +100,6 @@ def _table(*args: Any, **kwargs: Any) -> Table:
     from rich.table import Table
 
     return Table(*args, **kwargs)
-
-
-def print_json(obj: Any) -> None:
-    sys.stdout.write(json.dumps(obj, indent=2, allow_nan=True) + "\n")
 
 
 # ----------------------------------------------------------------------------------------- trace
@@ -476,6 +472,11 @@ def simulate(
 ) -> None:
     """Simulate a scene through the lens, computing only the effects the scene calls for."""
     from lensopt.cli_imaging import parse_grid, run_simulate
+    from lensopt.resources import require
+
+    psf_grid = parse_grid(grid)
+    if psf_grid is not None:  # each cell holds RGB PSFs of up to 161×161 float32 bins, a few copies
+        require(psf_grid[0] * psf_grid[1] * 161 * 161 * 3 * 4 * 4, f"a {grid} PSF grid", lower="--grid", path="--grid")
 
     if not plan_only and output is None:
         raise LensoptError("needed unless --plan", path="--output")
@@ -484,7 +485,7 @@ def simulate(
     if not 0.0 <= overlap < 1.0:
         raise LensoptError("must lie in [0, 1)", path="--overlap", got=overlap)
     result = run_simulate(load_model(lens), image, output, region=region, effects=effects, reference=reference,
-                          plan_only=plan_only, sampling=rays, kernel=kernel, grid=parse_grid(grid), overlap=overlap,
+                          plan_only=plan_only, sampling=rays, kernel=kernel, grid=psf_grid, overlap=overlap,
                           seed=seed, on_plan=None if as_json else _render_plan)
     if as_json:
         print_json(result)
@@ -520,7 +521,9 @@ def _render_run(r: dict[str, Any]) -> None:
     console.print(t)
     m = r.get("metrics")
     if m:
-        console.print(f"vs {m['against']}: PSNR {m['psnr_db']:.2f} dB, SSIM {m['ssim']:.4f} ({m['space']})")
+        psnr = "∞ (identical)" if m["psnr_db"] == math.inf else f"{m['psnr_db']:.2f} dB"
+        ssim = f"{m['ssim']:.4f}" if math.isfinite(m["ssim"]) else "— (image smaller than the 11-pixel window)"
+        console.print(f"vs {m['against']}: PSNR {psnr}, SSIM {ssim} ({m['space']})")
     err_console.print(f"wrote {r['output']} ({r['output_encoding']}; input {r['input_encoding']})", highlight=False)
 
 
@@ -539,13 +542,14 @@ def plot_psf(
                                                    "else 1 µm).")] = None,
     sqrt: Annotated[bool, typer.Option("--sqrt", help="Square-root intensity scale (shows the tails).")] = False,
     seed: SeedOpt = 0,
+    dpi: DpiOpt = 150,
 ) -> None:
     """RGB PSFs across the field (the spec's fields)."""
     from lensopt.cli_imaging import plot_psfs
 
     check_output(output, (".png", ".pdf", ".svg"), what="image file")
     plot_psfs(load_model(lens), output, sampling=rays, kernel=kernel, diffraction=diffraction, pitch_um=pitch_um,
-              sqrt=sqrt, seed=seed)
+              sqrt=sqrt, seed=seed, dpi=dpi)
     err_console.print(f"wrote {output}", highlight=False)
 
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import json
+import logging
 import math
 import os
 import signal
@@ -32,7 +34,7 @@ from lensopt.errors import LensoptError
 
 __all__ = ["AimOpt", "AimStepsOpt", "EX_INTERNAL", "JsonOpt", "LensArg", "SamplingOpt", "SeedOpt",
            "Terminated", "check_output", "console", "err_console", "handle_errors", "LensoptGroup",
-           "report_signal", "signals_deferred", "state"]
+           "report_signal", "signals_deferred", "state", "print_json", "LowerLevelFormatter"]
 
 EX_USAGE, EX_INTERNAL, EX_SIGINT, EX_SIGTERM = 2, 70, 130, 143
 F = TypeVar("F", bound=Callable[..., Any])
@@ -229,5 +231,23 @@ def _is_pseudo_fs(folder: Path) -> bool:
     return len(parts) > 1 and parts[1] in ("proc", "sys")
 
 
-def finite_or_none(v: float | None) -> float | None:
-    return None if v is None or not math.isfinite(v) else v
+def _clean(obj: Any) -> Any:
+    """JSON-safe numbers: NaN/inf → null (the reason is elsewhere in the object); finite floats unchanged."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_clean(v) for v in obj]
+    return obj
+
+
+def print_json(obj: Any) -> None:
+    sys.stdout.write(json.dumps(_clean(obj), indent=2, allow_nan=False) + "\n")
+
+
+class LowerLevelFormatter(logging.Formatter):
+    """Log records as one plain line, ``warning: message``."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        return " ".join(super().format(record).split()).replace(record.levelname, record.levelname.lower(), 1)
