@@ -35,6 +35,7 @@ from lensopt.optics.vignetting import (
     front_aperture_disc,
     outside_front_aperture,
 )
+from lensopt.resources import BYTES_PER_RAY_SURFACE, require
 
 __all__ = ["Bundle", "PupilShape", "pupil_shape", "trace_bundle", "AIM_MODES"]
 
@@ -181,6 +182,9 @@ def trace_bundle(
         half_pupil = False
     if pupil.dim() == 2:
         pupil = pupil.expand(rel_field.shape[0], lens.wavelength_um.shape[0], *pupil.shape)
+    rays_n = pupil.numel() // 2
+    require(rays_n * (len(lens.shapes) + 2) * BYTES_PER_RAY_SURFACE, f"tracing {rays_n:,} rays",
+            lower="the pupil sampling (rings:N / grid:N) or the number of fields and wavelengths")
     if vignetting is None and system.vignetting and len(system.vignetting) == rel_field.shape[0]:
         vignetting = torch.tensor(system.vignetting, dtype=lens.dtype, device=lens.device).unsqueeze(1)
     if shape is None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+import typing
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -46,10 +47,35 @@ __all__ = [
 ]
 
 
+#: Largest gap or clear semi-diameter accepted, mm (1 km): beyond it a lens is a typo, and float64 ray
+#: arithmetic on 1e308 mm overflows to NaN.
+MAX_LENGTH_MM = 1e6
+_SCALARS = {float: "a valid number", int: "a valid integer", bool: "true or false"}
+
+
+def _scalar_kind(annotation: Any) -> str | None:
+    """``a number`` for float / float | None fields (likewise int, bool); None for anything else."""
+    if annotation in _SCALARS:
+        return _SCALARS[annotation]
+    args = [a for a in typing.get_args(annotation) if a is not type(None)]
+    return _SCALARS.get(args[0]) if len(args) == 1 and args[0] in _SCALARS else None
+
+
 class _Model(BaseModel):
     # Numbers must be finite (TOML accepts inf and nan); only a radius may be inf (a flat surface).
     model_config = ConfigDict(extra="forbid", validate_assignment=True, ser_json_inf_nan="constants",
                               allow_inf_nan=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_text_numbers(cls, data: Any) -> Any:
+        """``radius = "1e999"`` or ``stop = "yes"`` are typos, not numbers or flags (pydantic would coerce)."""
+        if isinstance(data, dict):
+            for name, info in cls.model_fields.items():
+                value = data.get(name)
+                if isinstance(value, str) and (kind := _scalar_kind(info.annotation)) is not None:
+                    raise ValueError(f"@{name}: must be {kind}, not text (got {value!r})")
+        return data
 
 
 # --------------------------------------------------------------------------------------- system
@@ -218,7 +244,7 @@ class SpectrumSpec(_Model):
 
 
 class SensorSpec(_Model):
-    pixel_pitch_um: float = Field(gt=0)
+    pixel_pitch_um: float = Field(gt=0, le=1e4)
     resolution: tuple[int, int] | None = None
 
     @field_validator("resolution")
@@ -346,9 +372,9 @@ _VARY_RE = re.compile(r"^(radius|thickness|conic|material|coefficients|phase)(\.
 class _Interface(_Model):
     """What every surface has: the gap after it, its medium, clear aperture, stop flag, variables."""
 
-    thickness: float
+    thickness: float = Field(ge=-MAX_LENGTH_MM, le=MAX_LENGTH_MM)
     material: MaterialSpec = "air"
-    semi_diameter: float | None = Field(default=None, gt=0)
+    semi_diameter: float | None = Field(default=None, gt=0, le=MAX_LENGTH_MM)
     stop: bool = False
     clip: bool = False
     vary: list[str] = Field(default_factory=list)
