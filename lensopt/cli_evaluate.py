@@ -19,7 +19,7 @@ __all__ = ["register"]
 
 def register(app: typer.Typer) -> None:
     """Add the ``evaluate`` command to ``app``."""
-    from lensopt.cli import JsonOpt, LensArg, SeedOpt, console, err_console, handle_errors, load_model, print_json
+    from lensopt.cli import JsonOpt, LensArg, console, err_console, handle_errors, load_model, print_json
 
     @app.command()
     @handle_errors
@@ -36,7 +36,8 @@ def register(app: typer.Typer) -> None:
         noise: Annotated[float, typer.Option("--noise", help="Additive Gaussian noise σ, fraction of the maximum "
                                              "(the seed's training value: 0.005).")] = 0.0,
         rings: Annotated[int, typer.Option("--rings", help="Rings of relative tile radius in the breakdown.")] = 4,
-        seed: SeedOpt = 0,
+        seed: Annotated[int, typer.Option("--seed", help="Seed of the scene ↔ tile pairing, the dead-leaves "
+                                          "scenes, the noise and the pupil jitter.")] = 0,
         as_json: JsonOpt = False,
     ) -> None:
         """Pre-restoration PSNR and SSIM of central crops, each paired with a sensor tile (S4.3.1)."""
