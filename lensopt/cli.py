@@ -536,7 +536,7 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
 
 from lensopt.cli_evaluate import register as _register_evaluate  # noqa: E402  (needs the app above)
 
-_register_evaluate(app)
+_register_evaluate(app, plot_app)
 
 if __name__ == "__main__":  # pragma: no cover
     app()
