@@ -600,7 +600,7 @@ _register_accuracy(app)
 
 from lensopt.cli_evaluate import register as _register_evaluate  # noqa: E402  (needs the app above)
 
-_register_evaluate(app)
+_register_evaluate(app, plot_app)
 
 from lensopt.cli_tolerance import register as _register_tolerance  # noqa: E402
 

@@ -124,3 +124,4 @@ def test_bad_input_is_one_line_exit_2(tmp_path: Path, args: list[str], path: str
 def test_lens_without_sensor_is_one_line_exit_2() -> None:
     r = runner.invoke(app, ["evaluate", str(ROOT / "specs" / "double_gauss.toml"), "--count", "1"])
     assert r.exit_code == 2 and r.stderr.startswith("error: sensor:"), r.output
+    assert "give [sensor] pixel_pitch_um" in r.stderr  # the message's brackets survive rich's markup
