@@ -193,9 +193,10 @@ class LensoptGroup(TyperGroup):
             code = rv if isinstance(rv, int) else 0
             if code == EX_SIGINT:  # typer turns a KeyboardInterrupt outside the commands into exit 130
                 code = report_signal()
-        except getattr(click_exc, "NoArgsIsHelpError", ()) as err:
-            err.show()
-            code = err.exit_code
+        except getattr(click_exc, "NoArgsIsHelpError", ()) as err:  # `lensopt`, `lensopt plot`: the help
+            if err.ctx is not None:
+                sys.stdout.write(err.ctx.get_help() + "\n")
+            code = 0
         except click_exc.ClickException as err:
             hint = ""
             ctx = getattr(err, "ctx", None)

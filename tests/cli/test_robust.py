@@ -422,7 +422,7 @@ def test_optimize_is_bit_identical_with_1_and_2_threads() -> None:
 @pytest.mark.slow
 def test_timeout_term_leaves_a_valid_cmount_lens(tmp_path: Path) -> None:
     """``timeout -s TERM 20 lensopt optimize specs/cmount_4p.toml -o x.json`` (the issue's CI case)."""
-    cmd = ["timeout", "-s", "TERM", "20", sys.executable, "-m", "lensopt", "optimize",
+    cmd = ["timeout", "--preserve-status", "-s", "TERM", "20", sys.executable, "-m", "lensopt", "optimize",
            str(ROOT / "specs" / "cmount_4p.toml"), "-o", str(tmp_path / "x.json")]
     r = subprocess.run(cmd, capture_output=True, text=True, env=ENV, timeout=300)
     assert r.returncode == 143 and "Traceback" not in r.stderr, r.stderr
