@@ -43,7 +43,7 @@ if TYPE_CHECKING:
 app = typer.Typer(cls=LensoptGroup, add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   rich_markup_mode=None,
                   help="Differentiable lens design: trace, plot, optimize, simulate, export.")
-plot_app = typer.Typer(no_args_is_help=True, help="Figures: layout, fans, spots, PSFs, field curves.")
+plot_app = typer.Typer(cls=LensoptGroup, no_args_is_help=True, help="Figures: layout, fans, spots, PSFs, field curves.")
 app.add_typer(plot_app, name="plot")
 
 

@@ -32,6 +32,7 @@ class LiveProgress:
         self.events: list[str] = []
         self._shown = 0.0
         self._printed = -math.inf
+        self._events_shown = 0
 
     def __enter__(self) -> LiveProgress:
         if self.enabled and not self.plain:
@@ -52,12 +53,12 @@ class LiveProgress:
         if p.event and p.event != "merit rose":
             self.events.append(f"step {p.step}: {p.event}")
         now = time.monotonic()
-        if self.enabled and self.plain:
-            if p.event and p.event != "merit rose":
-                self.console.print(f"step {p.step}: {p.event}", highlight=False, soft_wrap=True, markup=False)
-            if now - self._printed >= self.interval_s or p.step == p.steps:
-                self._printed = now
-                self.console.print(plain_line(p), highlight=False, soft_wrap=True, markup=False)
+        if self.enabled and self.plain and (now - self._printed >= self.interval_s or p.step == p.steps):
+            self._printed = now
+            new = self.events[self._events_shown:]
+            self._events_shown = len(self.events)
+            note = f"; {len(new)} event(s), last {new[-1]}" if new else ""
+            self.console.print(plain_line(p) + note, highlight=False, soft_wrap=True, markup=False)
         if self.live is not None and (now - self._shown > 0.12 or p.step == p.steps):
             self._shown = now
             self.live.update(self._render(p))
