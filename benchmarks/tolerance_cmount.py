@@ -21,6 +21,7 @@ import torch
 
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
+from lensopt.spec.tolerance_build import make_job
 from lensopt.tolerance.evaluate import evaluate
 from lensopt.tolerance.model import draw
 from lensopt.tolerance.run import (
@@ -31,7 +32,6 @@ from lensopt.tolerance.run import (
     sensitivity,
     yield_table,
 )
-from lensopt.tolerance.setup import make_job
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -15,8 +15,8 @@ import pytest
 
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
+from lensopt.spec.tolerance_build import make_job
 from lensopt.tolerance.run import HIGHER_IS_BETTER, monte_carlo, yield_table
-from lensopt.tolerance.setup import make_job
 
 CMOUNT = Path(__file__).resolve().parents[2] / "lenses" / "cmount_4p.json"
 
