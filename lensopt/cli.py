@@ -590,25 +590,15 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
     save_figure(field_figure(summary, title=title, subtitle=sub), out, dpi=dpi)
     err_console.print(f"wrote {output}")
 
-from lensopt.cli_check import register as _register_check  # noqa: E402
 
-_register_check(app)
-from lensopt.cli_accuracy import register as _register_accuracy  # noqa: E402
+# Commands that live in modules of their own (registered last: they need the apps above).
+from lensopt import cli_accuracy, cli_check, cli_evaluate, cli_tolerance, cli_zemax  # noqa: E402
 
-_register_accuracy(app)
-
-
-from lensopt.cli_evaluate import register as _register_evaluate  # noqa: E402  (needs the app above)
-
-_register_evaluate(app, plot_app)
-
-from lensopt.cli_tolerance import register as _register_tolerance  # noqa: E402
-
-_register_tolerance(app, plot_app)
-
-from lensopt.cli_zemax import register as _register_zemax  # noqa: E402
-
-_register_zemax(app)
+cli_check.register(app)
+cli_accuracy.register(app)
+cli_evaluate.register(app, plot_app)
+cli_tolerance.register(app, plot_app)
+cli_zemax.register(app)
 
 if __name__ == "__main__":  # pragma: no cover
     app()

@@ -50,6 +50,7 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
     import torch
 
     from lensopt.spec.io import save_json
+    from lensopt.spec.tolerance_build import make_job, trial_spec
     from lensopt.tolerance.run import (
         HIGHER_IS_BETTER,
         monte_carlo,
@@ -58,7 +59,6 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
         scalar_metric,
     )
     from lensopt.tolerance.run import sensitivity as run_sensitivity
-    from lensopt.tolerance.setup import make_job, trial_spec
 
     job = make_job(model, settings)
     unit = _METRIC_UNITS[job.metric]

@@ -12,10 +12,10 @@ import torch
 
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
+from lensopt.spec.tolerance_build import make_job, trial_spec
 from lensopt.tolerance.evaluate import EvalSetup, evaluate
 from lensopt.tolerance.model import Tolerance, draw, nominal_params
 from lensopt.tolerance.run import moments, monte_carlo, nominal_metrics, run_trials, sensitivity, yield_table
-from lensopt.tolerance.setup import make_job, trial_spec
 
 ROOT = Path(__file__).resolve().parents[2]
 CMOUNT = ROOT / "lenses" / "cmount_4p.json"
