@@ -35,6 +35,7 @@ TRACED = {
     # file: (catalogs, what it shows)
     "optiland_lens1.zmx": ((), "Cooke-like triplet, ENPD, angle fields, Schott glasses"),
     "optiland_lens_floa.zmx": ((), "FLOA (aperture from the stop's semi-diameter)"),
+    "optiland_lens_thorlabs_iso_8859_1.zmx": ((), "Thorlabs AL1815-C: EVENASPH r⁴…r¹⁶ with a conic, FLAP, Latin-1"),
     "rayoptics_US00583336-2-scaled.zmx": ((), "double Gauss: FNUM, vignetting VDYN/VCYN/VCXN, FLAP apertures"),
     "rayoptics_US08427765-1.zmx": ((AGF,), "EVENASPH, FLAP apertures, real-image-height fields, an AGF glass"),
 }
