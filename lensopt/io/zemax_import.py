@@ -59,6 +59,9 @@ _APERTURE_IGNORED = {"SQAP": "rectangular aperture", "ELAP": "elliptical apertur
                      "OBDC": "aperture decenter", "SCBD": "coordinate return / tilt-decenter data"}
 
 
+_MERIT = "merit function / tolerance data"
+
+
 @dataclass
 class ZemaxImport:
     """The imported lens and the warnings the import produced (one line each)."""
@@ -101,6 +104,7 @@ class ZFile:
     ignored: dict[str, int] = field(default_factory=dict)
     scale: float = 1.0
     extras: dict[str, Any] = field(default_factory=dict)
+    notices: list[str] = field(default_factory=list)
 
     def last(self, key: str) -> tuple[int, list[str]] | None:
         items = self.system.get(key)
@@ -160,7 +164,11 @@ def import_zemax(text: str, *, source: str = "zmx",
     if object_distance is not None and not object_distance > 0:
         raise SpecError(f"line {obj.line}: the object distance must be positive (got {obj.thickness:g})",
                         path=source)
+    warnings += zf.notices
     for name, count in zf.ignored.items():
+        if name == _MERIT:
+            warnings.append(f"ignored the merit function and tolerance data ({count} lines)")
+            continue
         warnings.append(f"ignored Zemax operand {name} ({count} line{'s' if count > 1 else ''}): lensopt does "
                         "not model it")
     spec = system_from_zemax(zf, surfaces, object_distance, extras, warnings)
@@ -201,6 +209,13 @@ def parse_zmx(text: str, *, source: str) -> ZFile:
             zf.surfaces.append(current)
             in_merit = False
             continue
+        if op == "MNUM" and len(tokens) > 1 and _is_number(tokens[1]) and float(tokens[1]) > 1:
+            zf.notices.append(f"the file has {int(float(tokens[1]))} configurations (MNUM): only the nominal one "
+                              "is imported")
+        if op == "ENVD" and len(tokens) > 2 and _is_number(tokens[1]) and _is_number(tokens[2]) and (
+                float(tokens[1]) != 20.0 or float(tokens[2]) != 1.0):
+            zf.notices.append(f"ignored the environment ENVD {tokens[1]} °C, {tokens[2]} atm: indices are taken at "
+                              "the catalogs' reference conditions (20 °C, 1 atm)")
         if op in ("DMFS", "TOL", "MNUM", "BLNK") or in_merit:
             in_merit = op not in _SYSTEM_OPS or in_merit
             if op not in ("BLNK",):
@@ -233,7 +248,7 @@ def parse_zmx(text: str, *, source: str) -> ZFile:
             continue
         zf.ignored[op] = zf.ignored.get(op, 0) + 1
     if merit_lines:
-        zf.ignored["merit function / tolerance data"] = merit_lines
+        zf.ignored[_MERIT] = merit_lines
     return zf
 
 

@@ -110,3 +110,11 @@ def test_cli_exit_codes_and_no_partial_output(tmp_path: Path) -> None:
     zmx = tmp_path / "back.zmx"
     res = runner.invoke(app, ["export-zemax", str(out), "-o", str(zmx)])
     assert res.exit_code == 0 and zmx.exists()
+
+
+def test_environment_and_configurations_are_one_warning_each() -> None:
+    text = LENS1.replace("MODE SEQ\n", "MODE SEQ\nENVD 35 1 0\n").replace("SURF 8\n", "MNUM 3 1\nSURF 8\n")
+    warnings = import_zemax(text).warnings
+    assert sum("ENVD 35" in w for w in warnings) == 1
+    assert sum("3 configurations" in w for w in warnings) == 1
+    assert not any("ENVD" in w for w in import_zemax(LENS1.replace("MODE SEQ\n", "MODE SEQ\nENVD 20 1 0\n")).warnings)
