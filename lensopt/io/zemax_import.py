@@ -347,6 +347,7 @@ def _lens_surfaces(zf: ZFile, catalogs: Any, extras: dict[str, Any], warnings: l
     surf_extras = extras.get("surfaces") if isinstance(extras.get("surfaces"), dict) else {}
     gcat = [t.upper() for _, tokens in zf.system.get("GCAT", []) for t in tokens[1:]]
     out: list[dict[str, Any]] = []
+    plain = 0  # non-COORDBRK blocks so far: the key of export_zemax's per-surface NOTE data
     lens = zf.surfaces[1:-1]
     if not any(s.stop for s in lens):
         warnings.append("no STOP in the file: surface 1 is taken as the aperture stop (Zemax's default)")
@@ -368,7 +369,8 @@ def _lens_surfaces(zf: ZFile, catalogs: Any, extras: dict[str, Any], warnings: l
             out[-1]["thickness"] += s.thickness * scale
             continue
         i = len(out)
-        extra = surf_extras.get(str(i + 1), {}) if isinstance(surf_extras, dict) else {}
+        plain += 1
+        extra = surf_extras.get(str(plain), {}) if isinstance(surf_extras, dict) else {}
         extra = extra if isinstance(extra, dict) else {}
         surf = _surface(zf, s, scale, catalogs, gcat, extra, warnings)
         surf["stop"] = s.stop or (not any(t.stop for t in lens) and i == 0)
