@@ -171,7 +171,13 @@ def import_zemax(text: str, *, source: str = "zmx",
             continue
         warnings.append(f"ignored Zemax operand {name} ({count} line{'s' if count > 1 else ''}): lensopt does "
                         "not model it")
-    spec = system_from_zemax(zf, surfaces, object_distance, extras, warnings)
+    try:
+        spec = system_from_zemax(zf, surfaces, object_distance, extras, warnings)
+    except LensoptError as err:
+        if "outside the valid range" in err.message:
+            raise SpecError(f"{err}; lensopt's catalog data stop there: give the glass's AGF catalog with "
+                            "--catalog FILE.agf to extrapolate it with a warning", path=source) from None
+        raise
     _range_warnings(spec, warnings)
     return ZemaxImport(spec, warnings)
 

@@ -118,3 +118,9 @@ def test_environment_and_configurations_are_one_warning_each() -> None:
     assert sum("ENVD 35" in w for w in warnings) == 1
     assert sum("3 configurations" in w for w in warnings) == 1
     assert not any("ENVD" in w for w in import_zemax(LENS1.replace("MODE SEQ\n", "MODE SEQ\nENVD 20 1 0\n")).warnings)
+
+
+def test_catalog_glass_outside_its_range_points_to_agf(tmp_path: Path) -> None:
+    text = _edit("WAVM 3 0.65627250000000004 1", "WAVM 3 3.5 1")  # 3.5 µm: beyond Schott's data
+    with pytest.raises(SpecError, match="outside the valid range.*--catalog"):
+        import_zemax(text)
