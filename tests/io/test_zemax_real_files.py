@@ -194,3 +194,22 @@ def test_paraxial_working_fnumber() -> None:
 
     model = build(import_zemax(_finite("FNUM 3.5 1")).spec)
     assert float(first_order(model.lens, model.system).working_fnumber) == pytest.approx(3.5, rel=1e-12)
+
+
+def test_vignetting_factors_follow_zemax_definition() -> None:
+    # OpticStudio: the pupil coordinate y becomes VDY + (1 − VCY) y, x becomes VDX + (1 − VCX) x. The
+    # double Gauss's VDYN/VCYN/VCXN applied by lensopt (S19–S20) map the pupil's edges there.
+    from lensopt.optics.vignetting import apply_vignetting
+
+    lens = _import("rayoptics_US00583336-2-scaled.zmx")
+    model = build(lens.spec)
+    vdy = [0.0, 6.208442661354e-2, 5.473246586901e-2]
+    vcy = [0.0, 1.556542586327e-1, 3.64762539196e-1]
+    vcx = [0.0, 2.455956935883e-3, 2.0477435112e-3]
+    factors = torch.tensor(model.system.vignetting, dtype=torch.float64).unsqueeze(1)  # (F, 1, 3)
+    edges = torch.tensor([[0.0, 1.0], [0.0, -1.0], [1.0, 0.0]], dtype=torch.float64).expand(3, 1, 3, 2)
+    got = apply_vignetting(edges, factors)[:, 0]
+    for f in range(3):
+        assert float(got[f, 0, 1]) == pytest.approx(vdy[f] + (1 - vcy[f]), abs=1e-15)
+        assert float(got[f, 1, 1]) == pytest.approx(vdy[f] - (1 - vcy[f]), abs=1e-15)
+        assert float(got[f, 2, 0]) == pytest.approx(1 - vcx[f], abs=1e-15)
