@@ -137,6 +137,13 @@ def import_zemax(text: str, *, source: str = "zmx",
             read_agf(c)
         except LensoptError as err:
             raise SpecError(err.message, path=f"--catalog {c}") from None
+    try:
+        return _import(text, source, catalogs)
+    except (ValueError, OverflowError, IndexError, KeyError, ZeroDivisionError) as err:
+        raise SpecError(f"malformed file ({type(err).__name__}: {err})", path=source) from None
+
+
+def _import(text: str, source: str, catalogs: Any) -> ZemaxImport:
     zf = parse_zmx(text, source=source)
     warnings: list[str] = []
     extras = _extras(zf, warnings)
@@ -191,9 +198,19 @@ def _num(tokens: list[str], i: int, line: int, source: str, default: float | Non
     if t.upper() in ("INFINITY", "INF"):
         return math.inf
     try:
-        return float(t.replace(",", "."))
+        value = float(t.replace(",", "."))
     except ValueError:
         raise SpecError(f"line {line}: {tokens[0]}: expected a number, got {t!r}", path=source) from None
+    if not math.isfinite(value):
+        raise SpecError(f"line {line}: {tokens[0]}: expected a finite number, got {t!r}", path=source)
+    return value
+
+
+def _index(tokens: list[str], i: int, line: int, source: str, default: int | None = None) -> int:
+    value = _num(tokens, i, line, source, None if default is None else float(default))
+    if value != int(value):
+        raise SpecError(f"line {line}: {tokens[0]}: expected an integer, got {tokens[i]!r}", path=source)
+    return int(value)
 
 
 def parse_zmx(text: str, *, source: str) -> ZFile:
@@ -208,7 +225,7 @@ def parse_zmx(text: str, *, source: str) -> ZFile:
             continue
         op = tokens[0].upper()
         if op == "SURF":
-            current = ZSurface(int(_num(tokens, 1, number, source, default=len(zf.surfaces))), number)
+            current = ZSurface(_index(tokens, 1, number, source, default=len(zf.surfaces)), number)
             zf.surfaces.append(current)
             in_merit = False
             continue
@@ -267,9 +284,9 @@ def _surface_operand(zf: ZFile, s: ZSurface, op: str, tokens: list[str], line: i
     elif op == "DISZ":
         s.thickness = _num(tokens, 1, line, src)
     elif op == "PARM":
-        s.parm[int(_num(tokens, 1, line, src))] = _num(tokens, 2, line, src)
+        s.parm[_index(tokens, 1, line, src)] = _num(tokens, 2, line, src)
     elif op == "XDAT":
-        s.xdat[int(_num(tokens, 1, line, src))] = _num(tokens, 2, line, src)
+        s.xdat[_index(tokens, 1, line, src)] = _num(tokens, 2, line, src)
     elif op == "GLAS":
         s.glass, s.glass_line = tokens[1:], line
     elif op == "STOP":

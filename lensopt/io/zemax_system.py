@@ -122,6 +122,8 @@ def _spectrum(zf: Any, n_waves: int | None, warnings: list[str]) -> dict[str, An
     for line, tokens in zf.system.get("WAVM", []):
         try:
             slots[int(tokens[1])] = (float(tokens[2]), float(tokens[3]) if len(tokens) > 3 else 1.0)
+            if not all(math.isfinite(v) for v in slots[int(tokens[1])]):
+                raise ValueError
         except (IndexError, ValueError):
             raise SpecError(f"line {line}: WAVM needs a slot number and a wavelength in µm", path=src) from None
     if not slots:
@@ -136,7 +138,10 @@ def _spectrum(zf: Any, n_waves: int | None, warnings: list[str]) -> dict[str, An
             warnings.append(f"FTYP declares {n_waves} wavelengths but the file gives {len(order)} (truncated?)")
         order = [k for k in order if k <= n_waves]
     pw_item = zf.last("PWAV")
-    primary = int(float(pw_item[1][1])) if pw_item and len(pw_item[1]) > 1 else order[0]
+    try:
+        primary = int(float(pw_item[1][1])) if pw_item and len(pw_item[1]) > 1 else order[0]
+    except (ValueError, OverflowError):
+        raise SpecError(f"line {pw_item[0]}: PWAV needs a wavelength number", path=src) from None
     if primary not in order:
         raise SpecError(f"primary wavelength PWAV {primary} is not one of the wavelengths in use", path=src)
     wl_nm: list[float] = []
