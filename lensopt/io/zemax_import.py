@@ -43,19 +43,18 @@ NOTE_PREFIX = "lensopt:"
 INFINITE_OBJECT = 1e10
 #: UNIT tokens -> millimetres.
 UNITS = {"MM": 1.0, "CM": 10.0, "IN": 25.4, "METER": 1000.0, "M": 1000.0}
+#: Surface operands: those read here, plus those whose content the file already resolved (pickups, variable
+#: flags) or that do not change the traced rays (display, coatings, thermal data, mechanical semi-diameter).
 _SURFACE_OPS = frozenset("TYPE CURV CONI PARM XDAT DISZ GLAS DIAM STOP CLAP FLAP OBDC SQAP ELAP OBSC SCBD "
-                         "COMM FIMP HIDE MIRR SLAB POPS MEMA VPAR VCRV VDSZ VCON VXDT PZUP COAT TCE IGNR "
-                         "FLOA_S MOFF_S".split())
+                         "COMM FIMP HIDE MIRR SLAB POPS MEMA VPAR VCRV VDSZ VCON VXDT PZUP COAT TCE IGNR".split())
 _SYSTEM_OPS = frozenset("NAME UNIT ENPD FNUM OBNA FLOA FTYP XFLN YFLN XFLD YFLD FWGN VDXN VDYN VCXN VCYN VANN "
                         "WAVM WAVL WWGT PWAV GCAT MODE RAIM NOTE".split())
 #: Operands with no effect on the traced lens (display, file, environment bookkeeping).
 _SILENT = frozenset("VERS PFIL LANG ENVD GFAC PUSH SDMA OMMA ROPD PICB POLS GLRS GSTD NSCD COFN HYPR BLNK "
-                    "ZVCY ZVDY ZVCX ZVDX MNUM MOFF TOL DMFS PRIM CONF SURF_END".split())
+                    "ZVCY ZVDY ZVCX ZVDX MNUM MOFF TOL DMFS".split())
 #: Surface operands that change the lens but that lensopt does not model: ignored with a warning.
 _APERTURE_IGNORED = {"SQAP": "rectangular aperture", "ELAP": "elliptical aperture", "OBSC": "obscuration",
                      "OBDC": "aperture decenter", "SCBD": "coordinate return / tilt-decenter data"}
-
-
 _MERIT = "merit function / tolerance data"
 
 
@@ -299,6 +298,8 @@ def _surface_operand(zf: ZFile, s: ZSurface, op: str, tokens: list[str], line: i
         s.flap = True
         if len(tokens) > 2:
             s.diam = _num(tokens, 2, line, src)
+    elif op == "IGNR" and len(tokens) > 1 and tokens[1] not in ("0", "0.0"):
+        s.ignored.append("IGNR (Zemax skips this surface when tracing; lensopt traces it)")
     elif op == "COMM":
         s.comment = raw.strip()[4:].strip() or None
     elif op in _APERTURE_IGNORED:
