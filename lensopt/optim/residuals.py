@@ -150,9 +150,9 @@ def failure_margin(bundle: Bundle, lens: Lens) -> Tensor:
         sd2 = lens.semi_diameter[s] ** 2
         u_hit = (h.pos[..., :2] ** 2).sum(-1)
         clipped = u_hit / torch.where(sd2 > 0, sd2, torch.ones_like(sd2)) - 1.0
-        m = torch.where(res.status == Status.TIR, tir, torch.zeros_like(tir))
-        m = torch.where(res.status == Status.MISSED, missed, m)
-        m = torch.where(res.status == Status.CLIPPED, clipped, m)
+        m = torch.where(res.status == int(Status.TIR), tir, torch.zeros_like(tir))
+        m = torch.where(res.status == int(Status.MISSED), missed, m)
+        m = torch.where(res.status == int(Status.CLIPPED), clipped, m)
         margin = torch.where(here, _ramp(m), margin)
     return margin
 
