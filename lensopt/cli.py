@@ -386,6 +386,9 @@ def optimize(
     seed: SeedOpt = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live display.")] = False,
     as_json: JsonOpt = False,
+    device: Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N: where the optimization runs.")] = "cpu",
+    jacobian: Annotated[str, typer.Option("--jacobian", help="eager | compiled (LM Jacobian; compiled: same "
+                                          "values, minutes to compile, faster steps).")] = "eager",
 ) -> None:
     """Levenberg–Marquardt (or Adam) for spot size with solves and constraints; Ctrl-C keeps the best lens."""
     from lensopt.analysis.report import trace_report
@@ -399,7 +402,8 @@ def optimize(
         raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
     start_spec = load_spec(spec)
     with LiveProgress(err_console, enabled=not quiet) as live:
-        result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live)
+        result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live,
+                              device=device, jacobian=jacobian)
     save_json(result.spec, output)  # atomic
     sampling = PupilSampling.parse("rings:24", seed=seed)
     final_problem = Problem(result.spec, seed=seed)

@@ -160,7 +160,7 @@ def trace_bundle(
         rel_field = torch.tensor(system.rel_field, dtype=lens.dtype, device=lens.device)
     tan = field_tangents(lens, system, rel_field)
     mode = system.aim if aim is None else aim
-    pupil = pupil.to(lens.dtype)
+    pupil = pupil.to(dtype=lens.dtype, device=lens.device)
     if pupil.dim() == 2:
         pupil = pupil.expand(rel_field.shape[0], lens.wavelength_um.shape[0], *pupil.shape)
     if vignetting is None and system.vignetting and len(system.vignetting) == rel_field.shape[0]:
