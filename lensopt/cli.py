@@ -432,7 +432,9 @@ def simulate(
     effects: Annotated[str | None, typer.Option("--effects", help="Force effects: +name / -name / noise=σ; names: "
                                                 "convolution, diffraction, distortion, ri, noise.")] = None,
     reference: Annotated[Path | None, typer.Option("--reference", help="Image to score the result against "
-                                                   "(PSNR/SSIM); default: the input scene.")] = None,
+                                                   "(PSNR/SSIM); implies --score.")] = None,
+    score: Annotated[bool, typer.Option("--score", help="Score PSNR/SSIM against the input scene (or "
+                                        "--reference); off by default: it costs more than the simulation.")] = False,
     plan_only: Annotated[bool, typer.Option("--plan", help="Print the plan and stop (nothing simulated).")] = False,
     rays: Annotated[str, typer.Option("--rays", help="Pupil sampling per PSF (rings:N = 2N² rays).")] = "rings:32",
     kernel: Annotated[str, typer.Option("--kernel", help="count | triangular | cosine (S1.4).")] = "triangular",
@@ -450,7 +452,7 @@ def simulate(
         raise LensoptError("must lie in [0, 1)", path="--overlap", got=overlap)
     result = run_simulate(load_model(lens), image, output, region=region, effects=effects, reference=reference,
                           plan_only=plan_only, sampling=rays, kernel=kernel, grid=parse_grid(grid), overlap=overlap,
-                          seed=seed, on_plan=None if as_json else _render_plan)
+                          seed=seed, on_plan=None if as_json else _render_plan, score=score)
     if as_json:
         print_json(result)
     elif not plan_only:
