@@ -419,6 +419,9 @@ def optimize(
     seed: SeedOpt = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live display.")] = False,
     as_json: JsonOpt = False,
+    device: Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N: where the optimization runs.")] = "cpu",
+    jacobian: Annotated[str, typer.Option("--jacobian", help="eager | compiled (LM Jacobian; compiled: same "
+                                          "values, minutes to compile, faster steps).")] = "eager",
 ) -> None:
     """Levenberg–Marquardt (or Adam) for spot size with solves and constraints; Ctrl-C keeps the best lens."""
     from lensopt.analysis.report import trace_report
@@ -435,7 +438,8 @@ def optimize(
     start_spec = load_spec(spec)
     try:
         with LiveProgress(err_console, enabled=not quiet) as live:
-            result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live)
+            result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live,
+                                  device=device, jacobian=jacobian)
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the first step: the best lens is the start lens
         with signals_deferred():
             save_json(start_spec, output)
@@ -471,7 +475,9 @@ def simulate(
     effects: Annotated[str | None, typer.Option("--effects", help="Force effects: +name / -name / noise=σ; names: "
                                                 "convolution, diffraction, distortion, ri, noise.")] = None,
     reference: Annotated[Path | None, typer.Option("--reference", help="Image to score the result against "
-                                                   "(PSNR/SSIM); default: the input scene.")] = None,
+                                                   "(PSNR/SSIM); implies --score.")] = None,
+    score: Annotated[bool, typer.Option("--score", help="Score PSNR/SSIM against the input scene (or "
+                                        "--reference); off by default: it costs more than the simulation.")] = False,
     plan_only: Annotated[bool, typer.Option("--plan", help="Print the plan and stop (nothing simulated).")] = False,
     rays: Annotated[str, typer.Option("--rays", help="Pupil sampling per PSF (rings:N = 2N² rays).")] = "rings:32",
     kernel: Annotated[str, typer.Option("--kernel", help="count | triangular | cosine (S1.4).")] = "triangular",
@@ -497,7 +503,7 @@ def simulate(
         raise LensoptError("must lie in [0, 1)", path="--overlap", got=overlap)
     result = run_simulate(load_model(lens), image, output, region=region, effects=effects, reference=reference,
                           plan_only=plan_only, sampling=rays, kernel=kernel, grid=psf_grid, overlap=overlap,
-                          seed=seed, on_plan=None if as_json else _render_plan)
+                          seed=seed, on_plan=None if as_json else _render_plan, score=score)
     if as_json:
         print_json(result)
     elif not plan_only:
