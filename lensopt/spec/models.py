@@ -14,6 +14,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from lensopt.spec.optim import OptimizeSpec
+from lensopt.spec.restore import RestoreSpec
 
 __all__ = [
     "ApertureSpec",
@@ -420,7 +421,8 @@ class ImageSpec(_Model):
 
 class LensSpec(_Model):
     """A complete lens: system, spectrum, optional sensor, surfaces in order, image, and the optional
-    ``[optimize]`` section read by ``lensopt optimize`` (see ``lensopt.spec.optim``)."""
+    ``[optimize]`` section read by ``lensopt optimize`` (see ``lensopt.spec.optim``) and the optional
+    ``[restore]`` section of the restoration network (``lensopt.spec.restore``)."""
 
     name: str = "lens"
     system: SystemSpec
@@ -429,6 +431,7 @@ class LensSpec(_Model):
     surfaces: list[SurfaceSpec] = Field(min_length=1)
     image: ImageSpec = Field(default_factory=ImageSpec)
     optimize: OptimizeSpec | None = None
+    restore: RestoreSpec | None = None
 
     @model_validator(mode="after")
     def _structure(self) -> LensSpec:
