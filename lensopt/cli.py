@@ -533,5 +533,9 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
     err_console.print(f"wrote {output}")
 
 
+from lensopt.cli_restore import register as _register_restore  # noqa: E402
+
+_register_restore(app)
+
 if __name__ == "__main__":  # pragma: no cover
     app()

@@ -100,6 +100,7 @@ def save_checkpoint(path: str | os.PathLike[str], ckpt: Checkpoint) -> Path:
         for n in (*_FILES, "meta.json"):
             with open(tmp / n, "rb") as f:
                 os.fsync(f.fileno())
+            os.chmod(tmp / n, 0o666 & ~_umask())
         os.chmod(tmp, 0o777 & ~_umask())
         if target.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".old", dir=target.parent))
