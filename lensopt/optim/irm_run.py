@@ -54,11 +54,12 @@ class IrmResult:
     checkpoint: str
 
 
-def _settings(setup: ImagingSetup, cfg: TrainConfig, steps: int, data: str) -> dict[str, Any]:
+def _settings(setup: ImagingSetup, cfg: TrainConfig, data: str) -> dict[str, Any]:
     t = asdict(cfg)
-    t.pop("extra", None)
+    # What does not change the trajectory may change on --resume (steps: the schedule follows the new total).
+    for k in ("extra", "steps", "checkpoint_every", "validate_every", "validation_patches"):
+        t.pop(k, None)
     t["betas"] = list(cfg.betas)
-    t["steps"] = steps
     return {"imaging": setup.describe(), "train": t, "data": data}
 
 
@@ -84,7 +85,7 @@ def train_irm(
     """Train a fresh network (or continue the checkpoint at ``output`` with ``resume``) on a fixed lens."""
     lens, system = lens_system
     fp = network_fingerprint(spec, net)
-    settings = _settings(setup, cfg, steps, data)
+    settings = _settings(setup, cfg, data)
     torch.manual_seed(cfg.seed)
     model = ConditionedRestorer(net).to(device)
     run = NetworkRun.fresh(model, cfg, cfg.seed)
