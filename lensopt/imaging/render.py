@@ -96,13 +96,17 @@ class Spots:
     working_fnumber: float
 
 
-def trace_spots(lens: Lens, system: System, rel_field: Tensor, sampling: PupilSampling, *,
+def trace_spots(lens: Lens, system: System, rel_field: Tensor, pupil: Tensor, *, half: bool,
                 fo: FirstOrder | None = None) -> Spots:
     """Spot diagrams of ``lens`` at relative fields ``rel_field`` (F,) for every wavelength of the lens,
-    differentiable in the lens tensors (forward and reverse mode)."""
+    differentiable in the lens tensors (forward and reverse mode).
+
+    Args:
+        pupil: (P, 2) pupil points (``PupilSampling.points``; drawn outside so that ``jacfwd`` sees no
+            random draw); half: they cover the half pupil x ≥ 0.
+    """
     fo = first_order(lens, system) if fo is None else fo
-    pts = sampling.points(dtype=lens.dtype, device=lens.device)
-    bundle = trace_bundle(lens, system, pts, half_pupil=sampling.half, rel_field=rel_field, fo=fo)
+    bundle = trace_bundle(lens, system, pupil.to(lens.dtype), half_pupil=half, rel_field=rel_field, fo=fo)
     res = bundle.result
     return Spots(res.pos[..., :2], res.valid, bundle.half_pupil, rel_field, system.wavelength_weights,
                  float(fo.working_fnumber.detach()))
@@ -194,7 +198,8 @@ def render_lens(lens: Lens, system: System, rel_field: Tensor, sampling: PupilSa
                 regions: Sequence[Region], sensor: Sensor, channel_weights: Tensor, settings: RenderSettings,
                 *, noise: bool = True) -> Tensor:
     """Trace, PSFs and rendering in one differentiable call (reverse mode through all of it)."""
-    spots = trace_spots(lens, system, rel_field, sampling)
+    spots = trace_spots(lens, system, rel_field, sampling.points(dtype=lens.dtype, device=lens.device),
+                        half=sampling.half)
     airy = None
     if settings.diffraction:
         airy = airy_for(spots, lens.wavelength_um, sensor.pitch_mm, float(lens.index[-1, 0].detach()))

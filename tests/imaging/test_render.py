@@ -40,7 +40,8 @@ def test_rendered_patch_equals_lensopt_simulate(region: str) -> None:
     # The same settings through the batch renderer.
     lens, system = select_wavelengths(model.lens, model.system, plan.wavelength_index)
     rel = torch.tensor(plan.fields_relative, dtype=torch.float64)
-    spots = trace_spots(lens, system, rel, PupilSampling.parse("rings:8", seed=0),
+    sampling = PupilSampling.parse("rings:8", seed=0)
+    spots = trace_spots(lens, system, rel, sampling.points(dtype=torch.float64), half=sampling.half,
                         fo=first_order(model.lens, model.system))
     pitch = plan.psf["pitch_um"] * 1e-3
     settings = RenderSettings(psf_size=sim.psfs.psf.shape[-1], grid=(3, 3), overlap=plan.overlap,
