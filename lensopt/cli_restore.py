@@ -180,6 +180,7 @@ def register(app: typer.Typer) -> None:
         im = ck.meta.get("settings", {}).get("imaging", {})
         arr, info = read_image(image)
         setup = imaging_setup(model.spec, patch=16, fields=int(im.get("fields", 9)),
+                              sampling=im.get("sampling", "rings:8"),
                               psf_size=int(im.get("psf_size", 31)), grid=tuple(im.get("grid", (3, 3))))
         if arr.shape[-1] != net.config.channels:
             raise LensoptError(f"the network restores {net.config.channels}-channel images", path="IMAGE",

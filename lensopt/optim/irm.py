@@ -37,7 +37,7 @@ from lensopt.restore.model import mean_patch_psf
 
 __all__ = ["ImagingSetup", "imaging_setup", "lens_psfs", "region_grids", "capture", "cosine_lr", "psnr_db",
            "NetworkRun", "network_step", "validation_set", "validate", "train_network", "make_optimizer",
-           "run_state", "load_run_state", "draw_batch", "GridCache"]
+           "run_state", "load_run_state", "draw_batch", "GridCache", "region_grids_for"]
 
 Source = DeadLeaves | ImageFolder
 
@@ -62,6 +62,7 @@ class ImagingSetup:
     channel_weights: Tensor
     settings: RenderSettings
     channels: int
+    sampling_text: str = "rings:8"
 
     @property
     def patch(self) -> int:
@@ -69,7 +70,8 @@ class ImagingSetup:
 
     def describe(self) -> dict[str, Any]:
         s = self.settings
-        return {"patch": self.patch, "sensor": [self.sensor.width, self.sensor.height], "fields": len(self.rel_field),
+        return {"patch": self.patch, "sampling": self.sampling_text, "sensor": [self.sensor.width, self.sensor.height],
+                "fields": len(self.rel_field),
                 "psf_size": s.psf_size, "grid": list(s.grid), "overlap": s.overlap, "channels": self.channels,
                 "noise_sigma": s.noise_sigma}
 
@@ -93,27 +95,34 @@ def imaging_setup(spec: Any, *, patch: int, fields: int = 9, sampling: str = "ri
     return ImagingSetup(sensor=sensor, tiles=tile_grid(sensor, patch, option="--patch"), rel_field=rel,
                         sampling=PupilSampling.parse(sampling, seed=0, path="--sampling"),
                         channel_weights=torch.as_tensor(cw, dtype=dtype, device=device), settings=settings,
-                        channels=channels)
+                        channels=channels, sampling_text=sampling)
 
 
 def lens_psfs(lens: Lens, system: System, setup: ImagingSetup) -> tuple[Tensor, Tensor]:
     """Field PSFs (F, W, S, S) at the sensor pitch and their centres (F, 2), differentiable in the lens."""
-    spots = trace_spots(lens, system, setup.rel_field, setup.sampling)
+    sp = setup.sampling
+    spots = trace_spots(lens, system, setup.rel_field.to(lens.dtype), sp.points(dtype=lens.dtype, device=lens.device),
+                        half=sp.half)
     return psfs_from_spots(spots.xy, spots.valid, spots.wavelength_weights, half=spots.half,
                            pitch_mm=setup.sensor.pitch_mm, settings=setup.settings)
 
 
 def region_grids(psf: Tensor, center: Tensor, regions: list[Region], setup: ImagingSetup) -> Tensor:
     """(B, H_g, W_g, C, K, K) PSF grids of the patches at ``regions`` (S1.5.1), as ``render_batch``."""
+    return region_grids_for(psf, center, regions, setup.sensor, setup.channel_weights, setup.settings)
+
+
+def region_grids_for(psf: Tensor, center: Tensor, regions: list[Region], sensor: Sensor, channel_weights: Tensor,
+                     settings: RenderSettings) -> Tensor:
+    """``region_grids`` with the sensor, channel weights and settings given one by one."""
     import numpy as np
 
     radius = np.abs(center[:, 1].detach().cpu().double().numpy())
     out = []
     for region in regions:
-        wf = torch.from_numpy(field_weights(radius, region, setup.sensor, setup.settings.grid)).to(psf.device)
-        out.append(build_psf_grid(psf, setup.channel_weights, wf,
-                                  cell_centers_mm(region, setup.sensor, setup.settings.grid),
-                                  pitch_mm=setup.sensor.pitch_mm, pixel_mm=region.pixel_mm(setup.sensor)[0]))
+        wf = torch.from_numpy(field_weights(radius, region, sensor, settings.grid)).to(psf.device)
+        out.append(build_psf_grid(psf, channel_weights, wf, cell_centers_mm(region, sensor, settings.grid),
+                                  pitch_mm=sensor.pitch_mm, pixel_mm=region.pixel_mm(sensor)[0]))
     return torch.stack(out)
 
 
