@@ -386,6 +386,10 @@ def optimize(
     seed: SeedOpt = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live display.")] = False,
     as_json: JsonOpt = False,
+    checkpoint: Annotated[Path | None, typer.Option("--checkpoint", help="restored: checkpoint folder.")] = None,
+    resume: Annotated[bool, typer.Option("--resume", help="restored: continue --checkpoint.")] = False,
+    device: Annotated[str, typer.Option("--device", help="restored: cpu | cuda | cuda:N | auto.")] = "cpu",
+    log_dir: Annotated[Path | None, typer.Option("--log-dir", help="restored: TensorBoard folder.")] = None,
 ) -> None:
     """Levenberg–Marquardt (or Adam) for spot size with solves and constraints; Ctrl-C keeps the best lens."""
     from lensopt.analysis.report import trace_report
@@ -398,6 +402,11 @@ def optimize(
     if output.suffix.lower() != ".json":
         raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
     start_spec = load_spec(spec)
+    if start_spec.optimize is not None and start_spec.optimize.objective == "restored":
+        from lensopt.cli_restore import optimize_restored
+
+        return optimize_restored(start_spec, output, steps=steps, seed=seed, checkpoint=checkpoint, resume=resume,
+                                 device=device, log_dir=log_dir, quiet=quiet, as_json=as_json)
     with LiveProgress(err_console, enabled=not quiet) as live:
         result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live)
     save_json(result.spec, output)  # atomic

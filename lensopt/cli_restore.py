@@ -190,3 +190,95 @@ def register(app: typer.Typer) -> None:
         y = restore_image(net, model.lens, model.system, setup, x, reg, tile=int(im.get("patch", 256)))
         desc = write_image(output, np.ascontiguousarray(y.clamp(0, 1).permute(1, 2, 0).cpu().numpy()), info)
         console.print(f"wrote {output} ({desc})", highlight=False)
+
+
+def init_distributed(device: Any) -> Any:
+    """A ``Dist`` for this process: torchrun sets RANK/WORLD_SIZE (gloo on CPU, NCCL on CUDA); else one process."""
+    import os
+
+    from lensopt.optim.joint import Dist
+
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world <= 1:
+        return Dist()
+    import torch.distributed as dist
+
+    if not dist.is_initialized():
+        dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
+    return Dist(dist.get_rank(), dist.get_world_size())
+
+
+def check_same_settings(dist: Any, settings: dict[str, Any]) -> None:
+    """Every rank must run the same command on the same spec: compare a hash of the settings."""
+    if not dist.active:
+        return
+    import hashlib
+
+    import torch.distributed as tdist
+
+    h = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode()).hexdigest()
+    hashes: list[str] = [""] * dist.world
+    tdist.all_gather_object(hashes, h)
+    if len(set(hashes)) > 1:
+        bad = [r for r, x in enumerate(hashes) if x != hashes[0]]
+        raise LensoptError(f"processes were started with different settings (ranks {bad} differ from rank 0); "
+                           "start every rank with the same command and spec", path="torchrun")
+
+
+def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed: int, checkpoint: Path | None,
+                      resume: bool, device: str, log_dir: Path | None, quiet: bool, as_json: bool) -> None:
+    """``lensopt optimize`` with ``objective = "restored"``: the joint run, then the lens (and, with
+    --checkpoint, the network) written; rank 0 only writes and prints under torchrun."""
+    from lensopt.cli import console, err_console
+    from lensopt.optim.joint_run import run_joint
+    from lensopt.spec import save_json
+
+    if output.suffix.lower() != ".json":
+        raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
+    dev = resolve_device(device)
+    dist = init_distributed(dev)
+    if dev.type == "cuda" and dist.active:
+        import torch
+
+        dev = torch.device("cuda", dist.rank % torch.cuda.device_count())
+        torch.cuda.set_device(dev)
+    try:
+        check_same_settings(dist, {"spec": start_spec.model_dump(mode="json"), "steps": steps, "seed": seed,
+                                   "checkpoint": str(checkpoint), "resume": resume})
+        loud = dist.rank == 0 and not quiet and not as_json
+
+        def show(rec: dict[str, Any]) -> None:
+            if not loud:
+                return
+            line = (f"step {rec['step']}  batch PSNR after restoration {rec['psnr_batch_db']:.2f} dB  "
+                    f"MAE {rec['mae']:.4f}  λ {rec['damping']:.2e}  ESR {rec['esr_um']:.2f} µm  {rec['wall_s']:.2f} s")
+            if "psnr_restored" in rec:
+                line += f"  | held-out {rec['psnr_raw']:.2f} → {rec['psnr_restored']:.2f} dB"
+            err_console.print(line, highlight=False)
+
+        with stop_on_signals() as flag:
+            res = run_joint(start_spec, steps=steps, seed=seed, checkpoint=checkpoint, resume=resume, device=dev,
+                            log_dir=log_dir, dist=dist, stop=lambda: flag[0], on_progress=show)
+        if dist.rank == 0:
+            save_json(res.spec, output)
+            summary = {"output": str(output), "checkpoint": str(checkpoint) if checkpoint else None,
+                       "steps": res.steps, "interrupted": res.interrupted, "start": res.start, "final": res.final,
+                       "elapsed_s": res.elapsed_s, "notes": res.notes, "processes": dist.world,
+                       "device": str(dev)}
+            if as_json:
+                console.print_json(json.dumps(summary))
+            else:
+                for n in res.notes:
+                    err_console.print(f"note: {n}", highlight=False)
+                if res.start and res.final:
+                    console.print(f"held-out PSNR raw {res.start['psnr_raw']:.2f} → {res.final['psnr_raw']:.2f} dB, "
+                                  f"restored {res.start['psnr_restored']:.2f} → {res.final['psnr_restored']:.2f} dB",
+                                  highlight=False)
+                console.print(f"wrote {output}" + (f" and {checkpoint}" if checkpoint else ""), highlight=False)
+    finally:
+        if dist.active:
+            import torch.distributed as tdist
+
+            tdist.destroy_process_group()
+    if res.interrupted:
+        raise typer.Exit(130)
