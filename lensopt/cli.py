@@ -17,6 +17,7 @@ from typing import Annotated, Any, TypeVar
 import typer
 from rich.console import Console
 from rich.logging import RichHandler
+from rich.markup import escape
 from rich.table import Table
 
 from lensopt.errors import LensoptError
@@ -50,7 +51,7 @@ def handle_errors(fn: F) -> F:
         try:
             return fn(*args, **kwargs)
         except LensoptError as err:
-            err_console.print(f"[bold red]error:[/] {err}", markup=True, highlight=False, soft_wrap=True)
+            err_console.print(f"[bold red]error:[/] {escape(str(err))}", markup=True, highlight=False, soft_wrap=True)
             raise typer.Exit(2) from None
         except KeyboardInterrupt:
             err_console.print("interrupted")
@@ -446,7 +447,7 @@ def simulate(
     as_json: JsonOpt = False,
 ) -> None:
     """Simulate a scene through the lens, computing only the effects the scene calls for."""
-    from lensopt.imaging.commands import parse_grid, run_simulate
+    from lensopt.cli_imaging import parse_grid, run_simulate
 
     if not plan_only and output is None:
         raise LensoptError("needed unless --plan", path="--output")
@@ -510,7 +511,7 @@ def plot_psf(
     seed: SeedOpt = 0,
 ) -> None:
     """RGB PSFs across the field (the spec's fields)."""
-    from lensopt.imaging.commands import plot_psfs
+    from lensopt.cli_imaging import plot_psfs
 
     plot_psfs(load_model(lens), output, sampling=rays, kernel=kernel, diffraction=diffraction, pitch_um=pitch_um,
               sqrt=sqrt, seed=seed)
@@ -542,8 +543,10 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
     err_console.print(f"wrote {output}")
 
 
+from lensopt.cli_evaluate import register as _register_evaluate  # noqa: E402  (needs the app above)
 from lensopt.cli_restore import register as _register_restore  # noqa: E402
 
+_register_evaluate(app)
 _register_restore(app)
 
 if __name__ == "__main__":  # pragma: no cover

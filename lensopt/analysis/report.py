@@ -1,31 +1,51 @@
 """Plain-data reports of a traced lens (what ``lensopt trace --json`` and ``lensopt ray`` print).
 
 Units in reports: mm for lengths, µm for spot radii, nm for wavelengths, degrees for angles.
+The functions take any ``LensModel`` (a name, the traced lens and system, the media): ``lensopt.spec``'s
+``Model`` is one; no spec (pydantic) is read here.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from typing import Any, Protocol
 
 import torch
 
 from lensopt.analysis.field import field_summary
 from lensopt.analysis.spot import spot_stats
+from lensopt.materials import Material
 from lensopt.optics.bundle import pupil_shape, trace_bundle
+from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling, launch, pupil_grid
 from lensopt.optics.trace import REASONS, Rays, Status, trace
 from lensopt.optics.vignetting import apply_vignetting, outside_front_aperture
-from lensopt.spec.build import Model, build
-from lensopt.spec.models import DiffractiveSurface
 
-__all__ = ["trace_report", "ray_report", "auto_semi_diameters"]
+__all__ = ["LensModel", "trace_report", "ray_report", "auto_semi_diameters", "prescription"]
+
+
+class LensModel(Protocol):
+    """What the reports read: ``lensopt.spec.Model`` satisfies it."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def lens(self) -> Lens: ...
+    @property
+    def system(self) -> System: ...
+    @property
+    def media(self) -> tuple[Material, ...]: ...
+
+
+def _nm(wavelength_um: float) -> float:
+    """µm → nm, rounded so that the spec's 550.0 comes back as 550.0 (not 550.0000000000001)."""
+    return round(wavelength_um * 1e3, 9)
 
 
 def trace_report(
-    model: Model, sampling: PupilSampling, *, aim: str | None = None, aim_steps: int | None = None
+    model: LensModel, sampling: PupilSampling, *, aim: str | None = None, aim_steps: int | None = None
 ) -> dict[str, Any]:
     """First-order data, per-field spot sizes, failures, distortion, relative illumination, pupil
     (vignetting, aiming) data, notes, and the resolved prescription."""
@@ -80,7 +100,7 @@ def trace_report(
             "vignetting": pupil,
         })
     report: dict[str, Any] = {
-        "name": model.spec.name,
+        "name": model.name,
         "first_order": {
             "efl": float(fo.efl),
             "bfl": float(fo.bfl),
@@ -94,9 +114,9 @@ def trace_report(
             "paraxial_image_height": float(fo.paraxial_image_height),
             "total_track": float(fo.total_track),
         },
-        "wavelengths_nm": list(model.spec.spectrum.wavelengths_nm),
+        "wavelengths_nm": [_nm(float(w)) for w in lens.wavelength_um],
         "wavelength_weights": [float(w) for w in system.wavelength_weights],
-        "reference_nm": model.spec.spectrum.wavelengths_nm[ref],
+        "reference_nm": _nm(float(lens.wavelength_um[ref])),
         "sampling": str(sampling),
         "aim": mode,
         "aim_steps": system.aim_steps,
@@ -106,37 +126,43 @@ def trace_report(
         "effective_spot_radius_um": 1e3 * float(stats.effective_radius),
         "fields": fields,
         "notes": list(summary.notes),
-        "surfaces": _surfaces(model, sd),
+        "surfaces": prescription(model, sd),
     }
     return report
 
 
-def _surfaces(model: Model, auto_sd: list[float]) -> list[dict[str, Any]]:
+def _table(row: torch.Tensor, first_power: int) -> dict[str, float]:
+    return {str(first_power + 2 * j): float(v) for j, v in enumerate(row.tolist()) if v != 0.0}
+
+
+def prescription(model: LensModel, auto_sd: list[float]) -> list[dict[str, Any]]:
+    """The resolved surfaces, read from the traced lens (``auto_sd``: semi-diameters where none is given)."""
     out = []
     lens = model.lens
-    for i, surf in enumerate(model.spec.surfaces):
-        base = surf.base if isinstance(surf, DiffractiveSurface) else surf
+    for i, shape in enumerate(lens.shapes):
         c = float(lens.curvature[i])
+        given = float(lens.semi_diameter[i])
         entry: dict[str, Any] = {
-            "type": surf.type,
+            "type": "diffractive" if shape.diffractive else shape.kind,
             "radius": math.inf if c == 0 else 1.0 / c,
             "thickness": float(lens.thickness[i]),
             "conic": float(lens.conic[i]),
-            "asphere": {str(p): v for p, v in getattr(base, "coefficients", {}).items()},
+            "asphere": _table(lens.asphere[i], 4) if lens.asphere.shape[-1] else {},
             "material": model.media[i + 1].name,
             "index": [float(v) for v in lens.index[i + 1]],
-            "semi_diameter": surf.semi_diameter if surf.semi_diameter is not None else auto_sd[i],
+            "semi_diameter": given if given > 0 else auto_sd[i],
             "stop": i == lens.stop,
         }
-        if isinstance(surf, DiffractiveSurface):
-            entry["base"] = base.type
-            entry["diffractive"] = {**{str(p): v for p, v in surf.phase.items()},
-                                    "design_wavelength_nm": surf.design_wavelength_nm, "order": surf.order}
+        if shape.diffractive:
+            entry["base"] = shape.kind
+            entry["diffractive"] = {**(_table(lens.phase[i], 2) if lens.phase.shape[-1] else {}),
+                                    "design_wavelength_nm": _nm(shape.design_wavelength_um or 0.0),
+                                    "order": shape.order}
         out.append(entry)
     return out
 
 
-def auto_semi_diameters(model: Model, *, aim: str | None = None, n: int = 21) -> list[float]:
+def auto_semi_diameters(model: LensModel, *, aim: str | None = None, n: int = 21) -> list[float]:
     """Clear semi-apertures from traced rays: the largest ray height on each surface over all fields
     and wavelengths (``grid:n`` pupil plus its rim), as optical design programs do when none is given."""
     lens, system = model.lens, model.system
@@ -154,18 +180,17 @@ def auto_semi_diameters(model: Model, *, aim: str | None = None, n: int = 21) ->
 
 
 def ray_report(
-    model: Model, *, field_deg: float, px: float, py: float, wavelength_nm: float, aim: str = "none"
+    model: LensModel, *, field_deg: float, px: float, py: float, wavelength_nm: float, aim: str = "none"
 ) -> dict[str, Any]:
     """One real ray, surface by surface (like CODE V's RSI): position, direction cosines, angles.
 
     The ray is launched like the rays of ``trace_bundle``: relative pupil coordinates on the system's
     paraxial entrance pupil (reference wavelength), whatever ``wavelength_nm`` is.
     """
-    spec = model.spec.model_copy(deep=True)
-    spec.spectrum = spec.spectrum.model_copy(update={
-        "wavelengths_nm": [wavelength_nm], "weights": None, "reference_nm": None, "rgb_weights": None})
-    single = build(spec, dtype=model.lens.dtype)
-    lens, system = single.lens, single.system
+    # The same lens at one wavelength: indices of every medium at that wavelength (as the builder does).
+    wl = torch.tensor([wavelength_nm * 1e-3], dtype=model.lens.dtype, device=model.lens.device)
+    lens = dataclasses.replace(model.lens, wavelength_um=wl, index=torch.stack([m.index(wl) for m in model.media]))
+    system = dataclasses.replace(model.system, wavelength_weights=torch.ones_like(wl), reference=0)
     tan = torch.tensor([math.tan(math.radians(field_deg))], dtype=lens.dtype)
     with torch.no_grad():
         # The entrance pupil (position, diameter) is the system's, at its reference wavelength, for

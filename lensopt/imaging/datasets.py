@@ -28,7 +28,7 @@ import torch
 
 from lensopt.errors import LensoptError
 
-__all__ = ["DeadLeaves", "ImageFolder", "IMAGE_SUFFIXES", "dead_leaves", "center_crop", "random_crop_flip",
+__all__ = ["DeadLeaves", "ImageFolder", "IMAGE_SUFFIXES", "dead_leaves", "is_div2k", "center_crop", "random_crop_flip",
            "sample_batch", "split_files"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr")
@@ -83,22 +83,45 @@ def dead_leaves(
     cx = rng.uniform(-r_max, aspect_w + r_max, n)
     cy = rng.uniform(-r_max, aspect_h + r_max, n)
     colour = _srgb_to_linear(rng.random((n + 1, channels)))
-    img = np.empty((height, width, channels), dtype=np.float64)
-    img[...] = colour[n]  # the background leaf
-    scale = side  # scene units → pixels
-    for k in range(n):
-        r_px = radius[k] * scale
-        x, y = cx[k] * scale, cy[k] * scale
-        c0, c1 = max(0, int(math.floor(x - r_px - 0.5))), min(width, int(math.ceil(x + r_px + 0.5)))
-        r0, r1 = max(0, int(math.floor(y - r_px - 0.5))), min(height, int(math.ceil(y + r_px + 0.5)))
-        if c0 >= c1 or r0 >= r1:
+    top = _paint_order(radius * side, cx * side, cy * side, height, width)
+    img = torch.from_numpy(colour)[torch.where(top < 0, n, top)]  # [H, W, C]; -1: the background leaf
+    return img.permute(2, 0, 1).to(device=device, dtype=dtype).contiguous()
+
+
+def _paint_order(r: np.ndarray, x: np.ndarray, y: np.ndarray, height: int, width: int) -> torch.Tensor:
+    """``[H, W]`` index of the last disk (by draw order) whose interior holds each pixel centre, −1 if none.
+
+    Disks (pixels: radius ``r``, centre ``x, y``) are grouped by radius into buckets of half-size R = 1, 2,
+    4, …; each bucket tests the (2R+1)² candidate pixels of all its disks at once and a scatter-max keeps
+    the topmost disk per pixel (the same result as painting back to front, in one pass).
+    """
+    top = torch.full((height * width,), -1, dtype=torch.int64)
+    idx_all = np.arange(r.size)
+    lo = 0.0
+    size = 1
+    while lo < r.max(initial=0.0):
+        sel = idx_all[(r > lo) & (r <= size)] if lo > 0 else idx_all[r <= size]
+        lo, half = float(size), size
+        size *= 2
+        if sel.size == 0:
             continue
-        xs = np.arange(c0, c1) + 0.5 - x
-        ys = np.arange(r0, r1) + 0.5 - y
-        inside = (ys[:, None] ** 2 + xs[None, :] ** 2) <= r_px * r_px
-        if inside.any():
-            img[r0:r1, c0:c1][inside] = colour[k]
-    return torch.from_numpy(img).permute(2, 0, 1).to(device=device, dtype=dtype).contiguous()
+        off = np.arange(2 * half + 1)
+        c0 = np.ceil(x[sel] - r[sel] - 0.5).astype(np.int64)
+        r0 = np.ceil(y[sel] - r[sel] - 0.5).astype(np.int64)
+        keep = (c0 + 2 * half >= 0) & (c0 < width) & (r0 + 2 * half >= 0) & (r0 < height)
+        sel, c0, r0 = sel[keep], c0[keep], r0[keep]
+        for start in range(0, sel.size, max(1, 2_000_000 // off.size**2)):
+            s_ = slice(start, start + max(1, 2_000_000 // off.size**2))
+            cols = c0[s_, None, None] + off[None, None, :]
+            rows = r0[s_, None, None] + off[None, :, None]
+            dx = cols + 0.5 - x[sel[s_], None, None]
+            dy = rows + 0.5 - y[sel[s_], None, None]
+            inside = ((dx * dx + dy * dy) <= (r[sel[s_], None, None] ** 2)) & (cols >= 0) & (cols < width)
+            inside &= (rows >= 0) & (rows < height)
+            pix = (rows * width + cols)[inside]
+            who = np.broadcast_to(sel[s_, None, None], inside.shape)[inside]
+            top.scatter_reduce_(0, torch.from_numpy(pix), torch.from_numpy(who), reduce="amax")
+    return top.view(height, width)
 
 
 def _check_patch(patch: int | tuple[int, int]) -> tuple[int, int]:
@@ -161,6 +184,12 @@ class DeadLeaves:
         return self.scene(index, ph, pw)
 
 
+def is_div2k(root: str | Path) -> bool:
+    """``root`` has the DIV2K layout (a ``train_HR/`` or ``valid_HR/`` subfolder)."""
+    root = Path(root)
+    return any((root / n).is_dir() for pair in _DIV2K.values() for n in pair)
+
+
 def split_files(files: list[Path], root: Path, split: str, val_fraction: float) -> list[Path]:
     """Deterministic split: files ordered by SHA-1 of their path relative to ``root``; the first
     ``round(val_fraction·n)`` (at least one when n ≥ 2 and val_fraction > 0) are validation."""
@@ -185,11 +214,12 @@ class ImageFolder:
         patch: the smallest size an image may have (pixels, int or (H, W)); smaller images are an error.
         val_fraction: share of files held out for validation when the folder has no DIV2K layout.
         option: the CLI option or spec field named in errors.
-        cache: decoded images kept in memory (least recently used dropped first).
+        cache: decoded images kept in memory (least recently used dropped first; a DIV2K image is
+            ≈ 33 MB as float32, so keep it small).
     """
 
     def __init__(self, root: str | Path, *, split: str = "all", patch: int | tuple[int, int] = 256,
-                 val_fraction: float = 0.1, option: str = "--images", cache: int = 16) -> None:
+                 val_fraction: float = 0.1, option: str = "--images", cache: int = 4) -> None:
         if split not in ("train", "val", "all"):
             raise LensoptError("split must be train, val or all", path=option, got=split)
         if not 0 <= val_fraction < 1:
@@ -228,8 +258,7 @@ class ImageFolder:
 
     @staticmethod
     def _div2k_folder(root: Path, split: str) -> Path | None:
-        names = [n for pair in _DIV2K.values() for n in pair]
-        if not any((root / n).is_dir() for n in names):
+        if not is_div2k(root):
             return None
         if split == "all":
             raise LensoptError("a DIV2K-style folder (train_HR/, valid_HR/): choose split train or val",

@@ -8,11 +8,12 @@ from dataclasses import dataclass
 import torch
 
 from lensopt.errors import LensoptError
+from lensopt.imaging.camera import Camera, SpectrumData
 from lensopt.materials import Material, ModelGlass, TabulatedGlass, material_from_name
 from lensopt.optics.lens import FrontAperture, Lens, SurfaceShape, System
 from lensopt.spec.models import DiffractiveSurface, LensSpec, ModelGlassSpec, TabulatedGlassSpec, curvature_of
 
-__all__ = ["Model", "build", "resolve_material"]
+__all__ = ["Model", "build", "camera_of", "resolve_material"]
 
 
 @dataclass(frozen=True)
@@ -30,6 +31,15 @@ class Model:
     system: System
     media: tuple[Material, ...]
     spec: LensSpec
+
+    @property
+    def name(self) -> str:
+        """The lens's name (what ``analysis.report`` reads instead of the spec)."""
+        return self.spec.name
+
+    def camera(self) -> Camera:
+        """The plain-data view imaging works on (``camera_of``)."""
+        return camera_of(self)
 
 
 def resolve_material(value: str | ModelGlassSpec | TabulatedGlassSpec, *, path: str) -> Material:
@@ -108,6 +118,22 @@ def build(spec: LensSpec, *, dtype: torch.dtype = torch.float64, device: torch.d
                                       sysm.front_aperture.lateral) if sysm.front_aperture is not None else None),
     )
     return Model(lens=lens, system=system, media=tuple(media), spec=spec)
+
+
+def camera_of(model: Model) -> Camera:
+    """The plain-data view imaging works on (``lensopt.imaging.camera``): no pydantic below this line."""
+    spec = model.spec
+    sp = spec.spectrum
+    spectrum = SpectrumData(
+        wavelengths_nm=tuple(float(w) for w in sp.wavelengths_nm),
+        weights=tuple(float(w) for w in sp.weights) if sp.weights is not None else None,
+        rgb_weights=tuple(tuple(float(v) for v in row) for row in sp.rgb_weights) if sp.rgb_weights else None,
+    )
+    sensor = spec.sensor
+    return Camera(name=spec.name, lens=model.lens, system=model.system, spectrum=spectrum,
+                  pixel_pitch_um=sensor.pixel_pitch_um if sensor is not None else None,
+                  resolution=(int(sensor.resolution[0]), int(sensor.resolution[1]))
+                  if sensor is not None and sensor.resolution is not None else None)
 
 
 def _coefficient_table(rows: list[dict[int, float]], *, first_power: int, dtype, device) -> torch.Tensor:

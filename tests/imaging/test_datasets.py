@@ -167,3 +167,26 @@ def test_folder_errors_name_the_folder_or_file(tmp_path: Path) -> None:
     _write(small / "tiny.png", _ramp(10, 12))
     with pytest.raises(LensoptError, match=r"--images: image 12×10 is smaller than the 16×16 patch.*tiny\.png"):
         ImageFolder(small, patch=16)
+
+
+def test_dead_leaves_equals_a_painters_algorithm() -> None:
+    # Oracle: paint the same disks back to front, one by one (later disks occlude earlier ones); the
+    # vectorized scatter-max must give the same pixels. Same draws as dead_leaves (its documented law).
+    import math
+
+    h, w, seed, r_min, r_max = 40, 56, 9, 0.02, 0.3
+    rng = np.random.default_rng(seed)
+    side = min(h, w)
+    mean_r2 = 2.0 * math.log(r_max / r_min) / (r_min**-2 - r_max**-2)
+    n = math.ceil(6.0 * (w / side + 2 * r_max) * (h / side + 2 * r_max) / (math.pi * mean_r2))
+    radius = (r_min**-2 - rng.random(n) * (r_min**-2 - r_max**-2)) ** -0.5
+    cx, cy = rng.uniform(-r_max, w / side + r_max, n), rng.uniform(-r_max, h / side + r_max, n)
+    colour = rng.random((n + 1, 3))
+    colour = np.where(colour <= 0.04045, colour / 12.92, ((colour + 0.055) / 1.055) ** 2.4)
+    img = np.empty((h, w, 3))
+    img[...] = colour[n]
+    yy, xx = np.mgrid[0:h, 0:w] + 0.5
+    for k in range(n):
+        img[(xx - cx[k] * side) ** 2 + (yy - cy[k] * side) ** 2 <= (radius[k] * side) ** 2] = colour[k]
+    got = dead_leaves(h, w, seed=seed, r_min=r_min, r_max=r_max, dtype=torch.float64)
+    assert torch.equal(got, torch.from_numpy(img).permute(2, 0, 1))
