@@ -282,3 +282,24 @@ def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed:
             tdist.destroy_process_group()
     if res.interrupted:
         raise typer.Exit(130)
+
+
+def irm_hook(model: Any, checkpoint: Path) -> Any:
+    """The ``restore`` hook of ``imaging.evaluate``: the checkpoint's network restores each capture at its
+    sensor region (``--irm`` of ``lensopt evaluate``)."""
+    from lensopt.optim.irm import imaging_setup
+    from lensopt.optim.irm_run import load_network, restore_image
+
+    net, ck = load_network(checkpoint, model.spec, option="--irm")
+    im = ck.meta.get("settings", {}).get("imaging", {})
+    setup = imaging_setup(model.spec, patch=16, fields=int(im.get("fields", 9)), sampling=im.get("sampling", "rings:8"),
+                          psf_size=int(im.get("psf_size", 31)), grid=tuple(im.get("grid", (3, 3))))
+
+    def hook(capture: Any, info: dict[str, Any]) -> Any:
+        if capture.shape[1] != net.config.channels:
+            raise LensoptError(f"the network restores {net.config.channels}-channel images", path="--irm",
+                               got=f"{capture.shape[1]} channels")
+        return restore_image(net, model.lens, model.system, setup, capture[0], info["region"],
+                             tile=int(im.get("patch", 256)))[None]
+
+    return hook
