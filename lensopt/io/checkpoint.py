@@ -187,11 +187,11 @@ def unflatten_optimizer(prefix: str, tensors: dict[str, Tensor], info: dict[str,
 
 
 def lens_structure(spec: Any) -> dict[str, Any]:
-    """What must match for a network to fit a lens: surface kinds, stop, variables, spectrum size.
+    """What must match for a network to fit a lens: surface kinds, the stop, the number of wavelengths.
 
-    Radii, thicknesses and glasses change during optimization and are not part of the structure.
+    Radii, thicknesses, glasses and ``vary`` lists change during design and are not part of it.
     ``spec`` is a ``lensopt.spec.LensSpec`` (read by attribute)."""
     return {
-        "surfaces": [[s.type, bool(s.stop), sorted(s.vary)] for s in spec.surfaces],
+        "surfaces": [[s.type, bool(s.stop)] for s in spec.surfaces],
         "wavelengths": len(spec.spectrum.wavelengths_nm),
     }

@@ -147,7 +147,7 @@ def load_network(path: Path, spec: Any, *, device: torch.device | str = "cpu",
     net = RestoreConfig.from_dict(probe.meta.get("network_config", {}))
     fp = network_fingerprint(spec, net)
     if probe.fingerprint != fp:
-        raise CheckpointError("was written for another lens structure (surfaces, stop, variables or spectrum "
+        raise CheckpointError("was written for another lens structure (surface kinds, stop or number of wavelengths "
                               "differ)", path=option, got=str(path))
     model = ConditionedRestorer(net).to(device)
     try:
