@@ -23,6 +23,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from lensopt.analysis.psf_stack import select_wavelengths
 from lensopt.errors import LensoptError
 from lensopt.imaging.datasets import DeadLeaves, ImageFolder, sample_batch
 from lensopt.imaging.plan import channel_weights
@@ -38,6 +39,7 @@ from lensopt.imaging.render import (
 )
 from lensopt.imaging.scene import Region, Sensor
 from lensopt.optics.lens import Lens, System
+from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling
 from lensopt.optim.gtra import GtraTarget, gtra_residual, gtra_target, psf_window
 from lensopt.optim.terms import Term, register_term
@@ -93,7 +95,10 @@ class ImageObjective:
         self.pupil, self.half = sampling.points(dtype=torch.float64), sampling.half
         wl = list(spec.spectrum.wavelengths_nm)
         cw, _, self.rgb_note = channel_weights(spec.spectrum, 3, wl)
-        self.channel_weights = torch.as_tensor(np.asarray(cw), dtype=torch.float64)
+        cw = torch.as_tensor(np.asarray(cw), dtype=torch.float64)
+        # Wavelengths that no channel weighs (e.g. a reference wavelength of weight 0) are not rendered.
+        self.keep = [i for i in range(cw.shape[0]) if float(cw[i].sum()) > 0]
+        self.channel_weights = cw[self.keep]
         self.tiles = tile_grid(self.sensor, image.patch, option="optimize.image.patch")
         if image.images is None:
             self.train: DeadLeaves | ImageFolder = DeadLeaves(seed=image.seed)
@@ -105,6 +110,7 @@ class ImageObjective:
         self.images: Tensor | None = None
         self.regions: list[Region] = []
         self.target: GtraTarget | None = None
+        self._held_out: dict[int, tuple[Tensor, list[Region]]] = {}
         self.set_batch(0)
 
     # ------------------------------------------------------------------------------------ batches
@@ -126,12 +132,16 @@ class ImageObjective:
 
     def spots(self, lens: Lens) -> Spots:
         """Spot diagrams ε of the rendering fields (differentiable in the lens)."""
-        return trace_spots(lens, self.system, self.rel_field.to(lens.dtype), self.pupil, half=self.half)
+        fo = first_order(lens, self.system)
+        sub, system = lens, self.system
+        if len(self.keep) < lens.wavelength_um.shape[0]:
+            sub, system = select_wavelengths(lens, self.system, self.keep)
+        return trace_spots(sub, system, self.rel_field.to(lens.dtype), self.pupil, half=self.half, fo=fo)
 
     def _airy(self, spots: Spots, lens: Lens) -> Tensor | None:
         if not self.settings.diffraction:
             return None
-        return airy_for(spots, lens.wavelength_um, self.sensor.pitch_mm, float(lens.index[-1, 0].detach()))
+        return airy_for(spots, lens.wavelength_um[self.keep], self.sensor.pitch_mm, float(lens.index[-1, 0].detach()))
 
     def render(self, xy: Tensor, spots: Spots, airy: Tensor | None, images: Tensor, regions: Sequence[Region],
                *, noise: bool = True) -> Tensor:
@@ -175,13 +185,15 @@ class ImageObjective:
         return torch.sqrt(2.0 * self.loss(lens).to(lens.dtype)).reshape(1)
 
     def held_out_psnr(self, lens: Lens, count: int | None = None) -> float:
-        """PSNR (dB) of the captures of ``count`` held-out patches (default ``validation``), noise included,
-        pseudo-random regions; from the mean MSE over the patches."""
+        """PSNR (dB) of the captures of ``count`` held-out patches (default ``validation``; the same
+        patches and regions on every call), noise included, clipped to [0, 1]; from the mean MSE."""
         n = count or self.spec.validation
+        if n not in self._held_out:
+            self._held_out[n] = self.batch(-1, held_out=True, size=n)
+        images, regions = self._held_out[n]
         with torch.no_grad():
             spots = self.spots(lens)
             airy = self._airy(spots, lens)
-            images, regions = self.batch(-1, held_out=True, size=n)
             total = 0.0
             for k in range(0, n, self.spec.batch):
                 sl = slice(k, k + self.spec.batch)

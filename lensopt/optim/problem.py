@@ -66,7 +66,7 @@ class Problem:
     def __init__(self, spec: LensSpec, *, seed: int = 0, dtype: torch.dtype = torch.float64,
                  method: str | None = None, image_dtype: torch.dtype = torch.float32) -> None:
         self.opt: OptimizeSpec = spec.optimize or OptimizeSpec()
-        self.objective: str = self.opt.objective
+        self.objective: str = self.opt.objective or "spot"
         self.image: ImageObjective | None = None
         self.seed = seed
         self.dtype = dtype
