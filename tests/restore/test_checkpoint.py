@@ -129,7 +129,8 @@ def test_resume_is_bit_identical(tiny_lens: Path, tmp_path: Path) -> None:
 
 def test_train_irm_errors(tiny_lens: Path, other_lens: Path, tmp_path: Path) -> None:
     out = tmp_path / "ck"
-    assert _train(tiny_lens, out, "--steps", "1").exit_code == 0
+    assert _train(tiny_lens, out, "--steps", "1", "--log-dir", str(tmp_path / "tb")).exit_code == 0
+    assert list((tmp_path / "tb").glob("events.out.tfevents.*"))  # TensorBoard scalars
     r = _train(tiny_lens, out, "--steps", "1")  # exists, no --resume
     assert r.exit_code == 2 and "--resume" in r.output
     r = _train(other_lens, out, "--steps", "2", "--resume")
