@@ -196,6 +196,8 @@ def init_distributed(device: Any) -> Any:
     """A ``Dist`` for this process: torchrun sets RANK/WORLD_SIZE (gloo on CPU, NCCL on CUDA); else one process."""
     import os
 
+    import torch
+
     from lensopt.optim.joint import Dist
 
     world = int(os.environ.get("WORLD_SIZE", "1"))
@@ -205,7 +207,9 @@ def init_distributed(device: Any) -> Any:
 
     if not dist.is_initialized():
         dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
-    return Dist(dist.get_rank(), dist.get_world_size())
+    rank = dist.get_rank()
+    where = f"cuda:{rank % torch.cuda.device_count()}" if device.type == "cuda" else "cpu"
+    return Dist(rank, dist.get_world_size(), where)
 
 
 def check_same_settings(dist: Any, settings: dict[str, Any]) -> None:

@@ -176,7 +176,7 @@ def restore_image(model: ConditionedRestorer, lens: Any, system: Any, setup: Ima
                 sub = Region(region.x0 + xa * sx, region.y0 + ya * sy, (xb - xa) * sx, (yb - ya) * sy, xb - xa, yb - ya,
                              "tile")
                 grids = region_grids(psf, center, [sub], setup)
-                k = mean_patch_psf(grids.flatten(1, 2)).to(image.dtype)
+                k = mean_patch_psf(grids.flatten(1, 2)).to(image.device, image.dtype)
                 k = _fit_psf(k, min(yb - ya, xb - xa))
                 res = model(image[None, :, ya:yb, xa:xb], k)[0]
                 out[:, y0:y1, x0:x1] = res[:, y0 - ya:y1 - ya, x0 - xa:x1 - xa]

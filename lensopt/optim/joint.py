@@ -49,6 +49,7 @@ class Dist:
 
     rank: int = 0
     world: int = 1
+    device: str = "cpu"  # where collectives run: cpu for gloo, the rank's GPU for NCCL
 
     @property
     def active(self) -> bool:
@@ -65,18 +66,20 @@ class Dist:
             return t
         import torch.distributed as dist
 
-        t = t.detach().clone()
+        src = t.device
+        t = t.detach().clone().to(self.device)
         dist.all_reduce(t)
-        return t / self.world
+        return (t / self.world).to(src)
 
     def broadcast(self, t: Tensor) -> Tensor:
         if not self.active:
             return t
         import torch.distributed as dist
 
-        t = t.detach().clone().contiguous()
+        src = t.device
+        t = t.detach().clone().contiguous().to(self.device)
         dist.broadcast(t, 0)
-        return t
+        return t.to(src)
 
 
 class RestoredObjective(ImageObjective):
@@ -144,8 +147,8 @@ class RestoredObjective(ImageObjective):
         with torch.enable_grad():
             loss = local(e)
             (grad,) = torch.autograd.grad(loss, e)
-        loss = self.dist.mean(loss.detach().to(e0.dtype))
-        grad = self.dist.mean(torch.nan_to_num(grad.to(e0.dtype)))
+        loss = self.dist.mean(loss.detach().to(device=e0.device, dtype=e0.dtype))
+        grad = self.dist.mean(torch.nan_to_num(grad.to(device=e0.device, dtype=e0.dtype)))
 
         def surrogate(xy: Tensor) -> Tensor:  # value L and gradient ∇L of the whole batch at ε₀, exactly
             return loss + (grad * (xy - e0)).sum()
