@@ -42,6 +42,8 @@ def register(app: typer.Typer, plot_app: typer.Typer | None = None) -> None:
         seed: Annotated[int, typer.Option("--seed", help="Seed of the scene ↔ tile pairing, the dead-leaves "
                                           "scenes, the noise and the pupil jitter.")] = 0,
         as_json: JsonOpt = False,
+        irm: Annotated[Path | None, typer.Option("--irm", help="Restoration network checkpoint (train-irm or "
+                                                 "joint): score before and after restoration.")] = None,
     ) -> None:
         """Pre-restoration PSNR and SSIM of central crops, each paired with a sensor tile (S4.3.1)."""
         from lensopt.cli_imaging import parse_grid
@@ -65,16 +67,28 @@ def register(app: typer.Typer, plot_app: typer.Typer | None = None) -> None:
         tile_grid(sensor_of(camera, patch, patch)[0], patch, option="--patch")  # bad sensor/patch: before the bar
         scenes, names, desc = scene_source(images, count=count, patch=patch, seed=seed)
         options = PlanOptions(sampling=rays, kernel=kernel, grid=parse_grid(grid), seed=seed)
-        with Progress(TextColumn("evaluating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                      TimeRemainingColumn(), console=err_console, transient=True, disable=as_json) as bar:
-            task = bar.add_task("scenes", total=len(names))
-            result = run_evaluate(camera, scenes, names, patch=patch, seed=seed, options=options,
-                                  noise_sigma=noise, rings=rings, images=desc,
-                                  progress=lambda done, total: bar.update(task, completed=done))
+        hooks: list[Any] = [None]
+        if irm is not None:
+            from lensopt.cli_restore import irm_hook
+
+            hooks.append(irm_hook(load_model(lens), irm))
+        results = []
+        for hook in hooks:
+            with Progress(TextColumn("evaluating" if hook is None else "restoring"), BarColumn(),
+                          MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(), console=err_console,
+                          transient=True, disable=as_json) as bar:
+                task = bar.add_task("scenes", total=len(names))
+                results.append(run_evaluate(camera, scenes, names, patch=patch, seed=seed, options=options,
+                                            noise_sigma=noise, rings=rings, images=desc, restore=hook,
+                                            progress=lambda done, total, b=bar, t=task: b.update(t, completed=done)))
         if as_json:
-            print_json(result.as_json())
+            out = results[0].as_json()
+            if len(results) > 1:
+                out["after_restoration"] = results[1].as_json()
+            print_json(out)
         else:
-            _render(console, result.as_json())
+            for result in results:
+                _render(console, result.as_json())
 
 
 def _register_plot(plot_app: typer.Typer) -> None:
