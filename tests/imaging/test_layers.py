@@ -27,7 +27,8 @@ KNOWN = {
     ("optim", "spec"),
     # CODE V import/export turns files into specs and back (spec is its data model).
     ("io", "spec"),
-    # Tolerancing perturbs a spec's parameters and rebuilds (tolerance/setup.py, issue of branch `tolerance`).
+    # tolerance.setup expands a spec's [tolerance] items against the built model and writes the worst
+    # trials back as specs (tolerance.model/run/evaluate, the Monte Carlo core, take tensors only).
     ("tolerance", "spec"),
 }
 
