@@ -12,9 +12,16 @@ from lensopt.imaging.camera import Camera, SpectrumData
 from lensopt.materials import Material, ModelGlass, TabulatedGlass, material_from_name
 from lensopt.optics.lens import FrontAperture, Lens, SurfaceShape, System
 from lensopt.optics.placement import Placement
-from lensopt.spec.models import DiffractiveSurface, LensSpec, ModelGlassSpec, TabulatedGlassSpec, curvature_of
+from lensopt.spec.models import (
+    AgfGlassSpec,
+    DiffractiveSurface,
+    LensSpec,
+    ModelGlassSpec,
+    TabulatedGlassSpec,
+    curvature_of,
+)
 
-__all__ = ["Model", "build", "camera_of", "resolve_material", "placement_of"]
+__all__ = ["Model", "build", "camera_of", "placement_of", "resolve_material"]
 
 
 @dataclass(frozen=True)
@@ -43,13 +50,17 @@ class Model:
         return camera_of(self)
 
 
-def resolve_material(value: str | ModelGlassSpec | TabulatedGlassSpec, *, path: str) -> Material:
+def resolve_material(value: str | ModelGlassSpec | TabulatedGlassSpec | AgfGlassSpec, *, path: str) -> Material:
     """Material object for a spec's ``material`` value; errors name ``path``."""
     try:
         if isinstance(value, ModelGlassSpec):
             return ModelGlass(value.nd, value.vd, value.dpgf, name=value.name)
         if isinstance(value, TabulatedGlassSpec):
             return TabulatedGlass(value.name, tuple(w * 1e-3 for w in value.wavelengths_nm), tuple(value.index))
+        if isinstance(value, AgfGlassSpec):
+            from lensopt.materials.agf import agf_glass
+
+            return agf_glass(value.catalog, value.glass)
         return material_from_name(value)
     except LensoptError as err:
         raise err.at(path) from None
