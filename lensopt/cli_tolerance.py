@@ -166,7 +166,8 @@ def _render(console: Any, r: dict[str, Any], top: int = 15) -> None:
     if "monte_carlo" in r:
         mc = r["monte_carlo"]
         st = mc["stats"]
-        console.print(f"Monte Carlo: {mc['trials']} trials ({mc['scheduler']}), {mc['seconds_per_trial']:.4f} s/trial; "
+        console.print(f"Monte Carlo: {mc['trials']} trials ({mc['scheduler']}), {mc['seconds_per_trial']:.4f} s/trial "
+                      f"(wall time, cluster start included); "
                       f"mean {st['mean']:.4f}, std {st['std']:.4f}, min {st['min']:.4f}, max {st['max']:.4f}; "
                       f"trials with failed rays {st['trials_with_failed_rays']}, "
                       f"compensator failures {st['compensator_failures']}")
