@@ -28,6 +28,7 @@ from lensopt.optim.irm import (
     Source,
     lens_psfs,
     load_run_state,
+    log_examples,
     region_grids,
     run_state,
     train_network,
@@ -130,7 +131,9 @@ def train_irm(
     val = validation_set(val_source, setup, cfg.validation_patches, seed=cfg.seed + 7919)
     try:
         interrupted = train_network(run, lens, system, setup, source, cfg, steps=steps, val=val,
-                                    checkpoint=checkpoint, on_progress=progress, stop=stop)
+                                    checkpoint=checkpoint, on_progress=progress, stop=stop,
+                                    on_validate=None if writer is None else
+                                    (lambda step, ex: log_examples(writer, "train-irm", step, ex)))
     finally:
         if writer is not None:
             writer.close()

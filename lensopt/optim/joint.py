@@ -217,7 +217,7 @@ def _db(mse: float) -> float:
 
 
 def evaluate_pair(obj: RestoredObjective, lens: Any, net: nn.Module, count: int, *, chunk: int = 4,
-                  with_ssim: bool = False) -> dict[str, float]:
+                  with_ssim: bool = False, examples: dict[str, Tensor] | None = None) -> dict[str, float]:
     """Held-out patches (``obj``'s held-out source and pseudo-random tiles, fixed noise): mean PSNR
     (and SSIM) of the captures and of their restorations."""
     images, regions = obj.batch(-1, held_out=True, size=count)
@@ -231,6 +231,8 @@ def evaluate_pair(obj: RestoredObjective, lens: Any, net: nn.Module, count: int,
             obj.noise_seed, obj.noise_offset = _seed("noise", obj.spec.seed, "held-out"), i
             cap, k = obj.capture(spots.xy, spots, airy, images[i:i + chunk], regions[i:i + chunk])
             out = net(cap, k.to(cap.dtype))
+            if examples is not None and i == 0:
+                examples.update(scene=images[:chunk], capture=cap, restored=out, psf=k)
             raw.append(psnr_db(images[i:i + chunk], cap))
             rest.append(psnr_db(images[i:i + chunk], out))
             if with_ssim:
