@@ -115,6 +115,8 @@ def register(app: typer.Typer) -> None:
         """Train the restoration network for a fixed lens (S4.3.2): Adam on MAE, cosine schedule."""
         import dataclasses
 
+        import torch
+
         from lensopt.optim.irm import imaging_setup
         from lensopt.optim.irm_run import train_irm
         from lensopt.restore.config import configs_from_spec
@@ -141,12 +143,29 @@ def register(app: typer.Typer) -> None:
                 line += f"  | held-out PSNR raw {rec['psnr_raw']:.2f} dB → restored {rec['psnr_restored']:.2f} dB"
             err_console.print(line, highlight=False)
 
-        with stop_on_signals() as flag:
-            res = train_irm(model.spec, dump_json(model.spec), (model.lens, model.system), setup, net, cfg, source,
-                            val_source, steps=n_steps, data=data, output=output, resume=resume, device=dev,
-                            log_dir=log_dir, stop=lambda: flag[0], on_progress=show)
+        dist = init_distributed(dev)
+        if dev.type == "cuda" and dist.active:
+            dev = torch.device(dist.device)
+            torch.cuda.set_device(dev)
+        try:
+            check_same_settings(dist, {"spec": model.spec.model_dump(mode="json"), "cfg": repr(cfg), "steps": n_steps,
+                                       "data": data, "resume": resume, "output": str(output)})
+            with stop_on_signals() as flag:
+                res = train_irm(model.spec, dump_json(model.spec), (model.lens, model.system), setup, net, cfg,
+                                source, val_source, steps=n_steps, data=data, output=output, resume=resume,
+                                device=dev, log_dir=log_dir, stop=lambda: dist.any(flag[0]),
+                                on_progress=show if dist.rank == 0 else None, dist=dist)
+        finally:
+            if dist.active:
+                import torch.distributed as tdist
+
+                tdist.destroy_process_group()
+        if dist.rank != 0:
+            if res.interrupted:
+                raise typer.Exit(130)
+            return
         summary = {"checkpoint": res.checkpoint, "steps": res.steps, "interrupted": res.interrupted,
-                   "validation": res.validation, "device": str(dev)}
+                   "validation": res.validation, "device": str(dev), "processes": dist.world}
         if as_json:
             console.print_json(json.dumps(summary))
         else:
@@ -262,7 +281,7 @@ def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed:
 
         with stop_on_signals() as flag:
             res = run_joint(start_spec, steps=steps, seed=seed, checkpoint=checkpoint, resume=resume, device=dev,
-                            log_dir=log_dir, dist=dist, stop=lambda: flag[0], on_progress=show)
+                            log_dir=log_dir, dist=dist, stop=lambda: dist.any(flag[0]), on_progress=show)
         if dist.rank == 0:
             save_json(res.spec, output)
             summary = {"output": str(output), "checkpoint": str(checkpoint) if checkpoint else None,

@@ -262,11 +262,17 @@ def train_network(
     on_progress: Callable[[dict[str, Any]], None] | None = None,
     stop: Callable[[], bool] = lambda: False,
     on_validate: Callable[[int, dict[str, Tensor]], None] | None = None,
+    share: slice | None = None,
+    mean: Callable[[Tensor], Tensor] | None = None,
 ) -> bool:
     """Continue ``run`` up to ``steps`` steps; returns True if stopped early by ``stop()``.
 
     ``on_validate(step, examples)`` receives the first validation patches (scene, capture, restored,
     psf) at each validation.
+
+    Data parallel (``torch.distributed``): every rank draws the same combined batch from the same
+    generators and trains on its ``share`` of it; ``run.model`` is then a ``DistributedDataParallel``
+    module (gradients averaged) and ``mean`` averages the reported loss over ranks.
     """
     device = next(run.model.parameters()).device
     with torch.no_grad():
@@ -279,11 +285,15 @@ def train_network(
             break
         t0 = time.perf_counter()
         scenes, tiles, noise = draw_batch(source, setup, cfg.batch, run.generators, device=device)
+        if share is not None:
+            scenes, tiles, noise = scenes[share], tiles[share], noise[share]
         grids = grids_of(tiles).to(device)
         cap = capture(scenes, grids, setup.settings, noise)
         kpsf = mean_patch_psf(grids.flatten(1, 2)).to(cap.dtype)
         lr = cosine_lr(run.step, steps, cfg.lr, cfg.lr_min)
         loss = network_step(run.model, run.optimizer, cap, kpsf, scenes, lr)
+        if mean is not None:
+            loss = float(mean(torch.tensor(loss, dtype=torch.float64)))
         run.step += 1
         rec: dict[str, Any] = {"step": run.step, "loss": loss, "lr": lr, "wall_s": time.perf_counter() - t0}
         if val is not None and cfg.validate_every and (run.step % cfg.validate_every == 0 or run.step == steps):

@@ -71,6 +71,17 @@ class Dist:
         dist.all_reduce(t)
         return (t / self.world).to(src)
 
+    def any(self, flag: bool) -> bool:
+        """True on every rank if ``flag`` is true on any (a stop request must be seen by all ranks at the
+        same step boundary, or the others would wait in the next collective)."""
+        if not self.active:
+            return flag
+        import torch.distributed as dist
+
+        t = torch.tensor([int(flag)], device=self.device)
+        dist.all_reduce(t, op=dist.ReduceOp.MAX)
+        return bool(t.item())
+
     def broadcast(self, t: Tensor) -> Tensor:
         if not self.active:
             return t
