@@ -1,4 +1,5 @@
-"""``python -m lensopt`` (and ``torchrun ... -m lensopt``): the command line."""
+"""``python -m lensopt`` (and ``torchrun ... -m lensopt``): the command line (same as the ``lensopt``
+script)."""
 
 from lensopt.cli import app
 

@@ -50,9 +50,12 @@ def stop_on_signals() -> Iterator[list[bool]]:
     flag = [False]
     old = {}
 
+    from lensopt.cli_common import state
+
     def handler(signum: int, frame: Any) -> None:
         if flag[0] and signum == signal.SIGINT:
             raise KeyboardInterrupt
+        state.signal_exit = 143 if signum == signal.SIGTERM else 130
         flag[0] = True
 
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -162,7 +165,7 @@ def register(app: typer.Typer) -> None:
                 tdist.destroy_process_group()
         if dist.rank != 0:
             if res.interrupted:
-                raise typer.Exit(130)
+                raise typer.Exit(_stopped())
             return
         summary = {"checkpoint": res.checkpoint, "steps": res.steps, "interrupted": res.interrupted,
                    "validation": res.validation, "device": str(dev), "processes": dist.world}
@@ -172,7 +175,7 @@ def register(app: typer.Typer) -> None:
             msg = f"wrote {res.checkpoint} (step {res.steps}{', interrupted' if res.interrupted else ''})"
             console.print(msg, highlight=False)
         if res.interrupted:
-            raise typer.Exit(130)
+            raise typer.Exit(_stopped())
 
     @app.command("restore")
     @handle_errors
@@ -304,7 +307,7 @@ def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed:
 
             tdist.destroy_process_group()
     if res.interrupted:
-        raise typer.Exit(130)
+        raise typer.Exit(_stopped())
 
 
 def irm_hook(model: Any, checkpoint: Path) -> Any:
@@ -326,3 +329,11 @@ def irm_hook(model: Any, checkpoint: Path) -> Any:
                              tile=int(im.get("patch", 256)))[None]
 
     return hook
+
+
+def _stopped() -> int:
+    """Exit code of a run stopped by a signal at a step boundary (130 Ctrl-C, 143 SIGTERM), its line printed."""
+    from lensopt.cli_common import report_signal, state
+
+    word = "terminated" if state.signal_exit == 143 else "interrupted"
+    return report_signal(f"{word}: stopped at a step boundary, checkpoint written")
