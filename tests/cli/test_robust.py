@@ -427,3 +427,13 @@ def test_timeout_term_leaves_a_valid_cmount_lens(tmp_path: Path) -> None:
     r = subprocess.run(cmd, capture_output=True, text=True, env=ENV, timeout=300)
     assert r.returncode == 143 and "Traceback" not in r.stderr, r.stderr
     _check_lens_dir(tmp_path, "x.json")
+
+
+def test_telephoto_layout_carries_its_front_aperture(tmp_path: Path) -> None:
+    from lensopt.analysis.layout import layout
+    from lensopt.spec import build
+
+    spec = load_spec(ROOT / "specs" / "telephoto_plastic.toml")
+    fa = spec.system.front_aperture
+    assert layout(build(spec), rays_per_field=3).front_aperture == (fa.distance, fa.diameter / 2)
+    assert layout(build(load_spec(COOKE)), rays_per_field=3).front_aperture is None
