@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from lensopt import __version__
+from lensopt.cli_backend import BackendOpt, with_backend
 from lensopt.cli_common import (  # noqa: F401  (re-exported: commands of other modules import them from here)
     AimOpt,
     AimStepsOpt,
@@ -107,8 +108,12 @@ def _table(*args: Any, **kwargs: Any) -> Table:
 
 @app.command(short_help="First-order data, spot sizes, failures, distortion, illumination.")
 @handle_errors
+@with_backend(err_console)
 def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None, seed: SeedOpt = 0,
-          as_json: JsonOpt = False, aim_steps: AimStepsOpt = None) -> None:
+          as_json: JsonOpt = False, aim_steps: AimStepsOpt = None,
+          mtf: Annotated[str | None, typer.Option("--mtf", help="Also MTF at these cycles/mm (comma-separated; "
+                                                  "in --json as mtf).")] = None,
+          backend: BackendOpt = "auto") -> None:
     """First-order data, RMS spot radius per field and wavelength, ray failures, distortion and
     relative illumination per field."""
     from lensopt.analysis.report import trace_report
@@ -116,6 +121,10 @@ def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None,
     model = load_model(lens)
     report = trace_report(model, parse_sampling(sampling, seed),
                           aim=check_aim(aim), aim_steps=check_aim_steps(aim_steps))
+    if mtf is not None:
+        from lensopt.cli_tolerance import mtf_report, parse_frequencies
+
+        report["mtf"] = mtf_report(model, parse_frequencies(mtf, "--mtf"))
     if as_json:
         print_json(report)
         return
@@ -452,6 +461,7 @@ def optimize(
 
 @app.command(short_help="Simulate a scene image through the lens.")
 @handle_errors
+@with_backend(err_console)
 def simulate(
     lens: LensArg,
     image: Annotated[Path, typer.Argument(help="Scene image (PNG/JPEG/TIFF/EXR; 8/16-bit files are sRGB).")],
@@ -469,9 +479,10 @@ def simulate(
     overlap: Annotated[float, typer.Option("--overlap", help="Overlap of patches (S1.5.2).")] = 0.25,
     seed: SeedOpt = 0,
     as_json: JsonOpt = False,
+    backend: BackendOpt = "auto",
 ) -> None:
     """Simulate a scene through the lens, computing only the effects the scene calls for."""
-    from lensopt.cli_imaging import parse_grid, run_simulate
+    from lensopt.cli_imaging import parse_grid, render_plan, render_run, run_simulate
     from lensopt.resources import require
 
     psf_grid = parse_grid(grid)
@@ -486,45 +497,11 @@ def simulate(
         raise LensoptError("must lie in [0, 1)", path="--overlap", got=overlap)
     result = run_simulate(load_model(lens), image, output, region=region, effects=effects, reference=reference,
                           plan_only=plan_only, sampling=rays, kernel=kernel, grid=psf_grid, overlap=overlap,
-                          seed=seed, on_plan=None if as_json else _render_plan)
+                          seed=seed, on_plan=None if as_json else render_plan)
     if as_json:
         print_json(result)
     elif not plan_only:
-        _render_run(result)
-
-
-def _render_plan(p: dict[str, Any]) -> None:
-    t = _table(title=f"plan — {p['lens']}: {p['image']['width']}×{p['image']['height']} "
-                    f"{'/'.join(p['channels'])} ({p['image']['encoding']}) on region {p['region']['name']} "
-                    f"({p['region']['w']:.0f}×{p['region']['h']:.0f} sensor px, image pixel {p['pixel_um']:.2f} µm)",
-              show_header=False)
-    t.add_row("wavelengths", ", ".join(f"{w:g}" for w in p["wavelengths_nm"]) + " nm")
-    t.add_row("fields traced", ", ".join(f"{f:.2f}°" for f in p["fields_deg"]) or "none")
-    grid = p["psf_grid"]
-    t.add_row("PSF grid", f"{grid[0]}×{grid[1]}, overlap {p['overlap']:.0%}" if grid else "none")
-    ps = p["psf"]
-    t.add_row("PSFs", f"{ps['sampling']}, {ps['kernel']} kernel, bins {ps['pitch_um']:.2f} µm"
-                      + (", resized to the image pixel" if ps["resize_to_pixel"] else ""))
-    for name, e in p["effects"].items():
-        t.add_row(name, f"[{'green' if e['on'] else 'dim'}]{'on' if e['on'] else 'off'}[/] — {e['reason']}")
-    for note in p["notes"]:
-        t.add_row("note", note)
-    console.print(t)
-
-
-def _render_run(r: dict[str, Any]) -> None:
-    t = _table(title="stages")
-    t.add_column("stage")
-    t.add_column("s", justify="right")
-    for k, v in r["timings"].items():
-        t.add_row(k, f"{v:.3f}")
-    console.print(t)
-    m = r.get("metrics")
-    if m:
-        psnr = "∞ (identical)" if m["psnr_db"] == math.inf else f"{m['psnr_db']:.2f} dB"
-        ssim = f"{m['ssim']:.4f}" if math.isfinite(m["ssim"]) else "— (image smaller than the 11-pixel window)"
-        console.print(f"vs {m['against']}: PSNR {psnr}, SSIM {ssim} ({m['space']})")
-    err_console.print(f"wrote {r['output']} ({r['output_encoding']}; input {r['input_encoding']})", highlight=False)
+        render_run(result)
 
 
 # ------------------------------------------------------------------------------------- plot psf
@@ -532,6 +509,7 @@ def _render_run(r: dict[str, Any]) -> None:
 
 @plot_app.command("psf")
 @handle_errors
+@with_backend(err_console)
 def plot_psf(
     lens: LensArg,
     output: Annotated[Path, typer.Option("--output", "-o", help="Figure file (png, pdf, svg).")],
@@ -542,6 +520,7 @@ def plot_psf(
                                                    "else 1 µm).")] = None,
     sqrt: Annotated[bool, typer.Option("--sqrt", help="Square-root intensity scale (shows the tails).")] = False,
     seed: SeedOpt = 0,
+    backend: BackendOpt = "auto",
     dpi: DpiOpt = 150,
 ) -> None:
     """RGB PSFs across the field (the spec's fields)."""
@@ -577,10 +556,25 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
     save_figure(field_figure(summary, title=title, subtitle=sub), out, dpi=dpi)
     err_console.print(f"wrote {output}")
 
+from lensopt.cli_check import register as _register_check  # noqa: E402
+
+_register_check(app)
+from lensopt.cli_accuracy import register as _register_accuracy  # noqa: E402
+
+_register_accuracy(app)
+
 
 from lensopt.cli_evaluate import register as _register_evaluate  # noqa: E402  (needs the app above)
 
 _register_evaluate(app)
+
+from lensopt.cli_tolerance import register as _register_tolerance  # noqa: E402
+
+_register_tolerance(app, plot_app)
+
+from lensopt.cli_zemax import register as _register_zemax  # noqa: E402
+
+_register_zemax(app)
 
 if __name__ == "__main__":  # pragma: no cover
     app()

@@ -23,6 +23,7 @@ from typing import Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from typer.core import TyperGroup
 
 try:  # typer ≥ 0.20 vendors click
@@ -80,7 +81,7 @@ def _one_line(text: str) -> str:
 
 def error_line(message: str) -> None:
     """``error: message`` as one line on stderr (no markup, no wrapping)."""
-    err_console.print(f"[bold red]error:[/] {_one_line(message)}", markup=True, highlight=False, soft_wrap=True,
+    err_console.print(f"[bold red]error:[/] {escape(_one_line(message))}", markup=True, highlight=False, soft_wrap=True,
                       emoji=False)
 
 

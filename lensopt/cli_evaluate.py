@@ -54,7 +54,11 @@ def register(app: typer.Typer) -> None:
 
         if kernel not in KERNELS:
             raise LensoptError(f"must be one of {', '.join(KERNELS)}", path="--kernel", got=kernel)
+        from lensopt.imaging.regions import tile_grid
+        from lensopt.imaging.simulate import sensor_of
+
         camera = camera_of(load_model(lens))
+        tile_grid(sensor_of(camera, patch, patch)[0], patch, option="--patch")  # bad sensor/patch: before the bar
         scenes, names, desc = scene_source(images, count=count, patch=patch, seed=seed)
         options = PlanOptions(sampling=rays, kernel=kernel, grid=parse_grid(grid), seed=seed)
         with Progress(TextColumn("evaluating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),

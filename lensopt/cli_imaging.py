@@ -22,7 +22,7 @@ from lensopt.imaging.simulate import plan_scene, run_plan
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec.build import Model, camera_of
 
-__all__ = ["parse_grid", "run_simulate", "plot_psfs"]
+__all__ = ["parse_grid", "run_simulate", "plot_psfs", "render_plan", "render_run"]
 
 
 def parse_grid(text: str | None) -> tuple[int, int] | None:
@@ -118,3 +118,49 @@ def plot_psfs(model: Model, output: Path, *, sampling: str = "rings:32", kernel:
         b = trace_bundle(lens, system, ps.points(dtype=lens.dtype), half_pupil=ps.half, rel_field=rel)
         rms = (spot_stats(b, system.wavelength_weights).rms_radius * 1e3).tolist()
     save_psf_figure(output, stack, ww, title=spec.name, sqrt=sqrt, rms_um=rms, dpi=dpi)
+
+
+def render_plan(p: dict[str, Any]) -> None:
+    """The simulation plan as a table (before the run)."""
+    from rich.table import Table
+
+    from lensopt.cli_common import console
+
+    t = Table(title=f"plan — {p['lens']}: {p['image']['width']}×{p['image']['height']} "
+                    f"{'/'.join(p['channels'])} ({p['image']['encoding']}) on region {p['region']['name']} "
+                    f"({p['region']['w']:.0f}×{p['region']['h']:.0f} sensor px, image pixel {p['pixel_um']:.2f} µm)",
+              show_header=False)
+    t.add_row("wavelengths", ", ".join(f"{w:g}" for w in p["wavelengths_nm"]) + " nm")
+    t.add_row("fields traced", ", ".join(f"{f:.2f}°" for f in p["fields_deg"]) or "none")
+    grid = p["psf_grid"]
+    t.add_row("PSF grid", f"{grid[0]}×{grid[1]}, overlap {p['overlap']:.0%}" if grid else "none")
+    ps = p["psf"]
+    t.add_row("PSFs", f"{ps['sampling']}, {ps['kernel']} kernel, bins {ps['pitch_um']:.2f} µm"
+                      + (", resized to the image pixel" if ps["resize_to_pixel"] else ""))
+    for name, e in p["effects"].items():
+        t.add_row(name, f"[{'green' if e['on'] else 'dim'}]{'on' if e['on'] else 'off'}[/] — {e['reason']}")
+    for note in p["notes"]:
+        t.add_row("note", note)
+    console.print(t)
+
+
+def render_run(r: dict[str, Any]) -> None:
+    """Stage timings, scores and the file written."""
+    import math
+
+    from rich.table import Table
+
+    from lensopt.cli_common import console, err_console
+
+    t = Table(title="stages")
+    t.add_column("stage")
+    t.add_column("s", justify="right")
+    for k, v in r["timings"].items():
+        t.add_row(k, f"{v:.3f}")
+    console.print(t)
+    m = r.get("metrics")
+    if m:
+        psnr = "∞ (identical)" if m["psnr_db"] == math.inf else f"{m['psnr_db']:.2f} dB"
+        ssim = f"{m['ssim']:.4f}" if math.isfinite(m["ssim"]) else "— (image smaller than the 11-pixel window)"
+        console.print(f"vs {m['against']}: PSNR {psnr}, SSIM {ssim} ({m['space']})")
+    err_console.print(f"wrote {r['output']} ({r['output_encoding']}; input {r['input_encoding']})", highlight=False)

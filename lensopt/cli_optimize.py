@@ -65,10 +65,13 @@ class LiveProgress:
 
     def _render(self, p: Progress) -> Group:
         t = Table(show_header=True, header_style="bold", title=f"lensopt optimize — {p.phase}")
-        for col in ("step", "merit ½‖ℓ‖²", "λ", "ESR µm", "accepted", "rejected", "rays ok", "wall s"):
+        image = p.image_loss == p.image_loss
+        cols = ["step", "merit ½‖ℓ‖²"] + (["image loss", "PSNR dB"] if image else [])
+        for col in cols + ["λ", "ESR µm", "accepted", "rejected", "rays ok", "wall s"]:
             t.add_column(col, justify="right")
         lam = "—" if p.damping != p.damping else f"{p.damping:.2e}"
-        t.add_row(f"{p.step}/{p.steps}", f"{p.merit:.6e}", lam, f"{p.esr_um:.3f}", str(p.accepted),
+        extra = [f"{p.image_loss:.4e}", f"{p.psnr_db:.2f}"] if image else []
+        t.add_row(f"{p.step}/{p.steps}", f"{p.merit:.6e}", *extra, lam, f"{p.esr_um:.3f}", str(p.accepted),
                   str(p.rejected), f"{100 * p.valid_fraction:.1f} %", f"{p.elapsed_s:.0f}")
         shares = Table(show_header=True, header_style="bold", title="share of the merit")
         names = [n for n, v in p.shares.items() if v > 0 or n == "tra"]
@@ -106,6 +109,8 @@ def summary(result: OptimizeResult, start: dict[str, Any], final: dict[str, Any]
                            "distance": b.distance} for b in result.bound],
         "constraints": constraints,
         "warning": result.warning,
+        "held_out_psnr_db": {"start": result.start_psnr_db, "final": result.final_psnr_db},
+        "image_history": [list(h) for h in result.image_history],
         "history": [list(h) for h in result.history],
     }
 
@@ -121,6 +126,9 @@ def render_summary(console: Console, s: dict[str, Any]) -> None:
     console.print(f"[bold]{head}[/] after {s['steps']} steps, {s['elapsed_s']:.1f} s; written to {s['output']}")
     console.print(f"effective spot radius ({fin['sampling']}): {_um(st['effective_spot_radius_um'])} → "
                   f"[bold]{_um(fin['effective_spot_radius_um'])}[/]")
+    psnr = s.get("held_out_psnr_db", {})
+    if psnr and psnr["start"] == psnr["start"]:
+        console.print(f"held-out raw PSNR: {psnr['start']:.3f} dB → [bold]{psnr['final']:.3f} dB[/]")
     fo = fin["first_order"]
     console.print(f"EFL {fo['efl']:.6f} mm, f/{fo['fnumber']:.4f}, total track {fo['total_track']:.4f} mm, "
                   f"paraxial image height {fo['paraxial_image_height']:.4f} mm")

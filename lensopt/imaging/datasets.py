@@ -214,11 +214,12 @@ class ImageFolder:
         patch: the smallest size an image may have (pixels, int or (H, W)); smaller images are an error.
         val_fraction: share of files held out for validation when the folder has no DIV2K layout.
         option: the CLI option or spec field named in errors.
-        cache: decoded images kept in memory (least recently used dropped first).
+        cache: decoded images kept in memory (least recently used dropped first; a DIV2K image is
+            ≈ 33 MB as float32, so keep it small).
     """
 
     def __init__(self, root: str | Path, *, split: str = "all", patch: int | tuple[int, int] = 256,
-                 val_fraction: float = 0.1, option: str = "--images", cache: int = 16) -> None:
+                 val_fraction: float = 0.1, option: str = "--images", cache: int = 4) -> None:
         if split not in ("train", "val", "all"):
             raise LensoptError("split must be train, val or all", path=option, got=split)
         if not 0 <= val_fraction < 1:

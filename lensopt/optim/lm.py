@@ -220,6 +220,12 @@ class LevenbergMarquardt:
                 return f"merit changed by less than {s.merit_tolerance:g} over {s.patience} steps"
         return None
 
+    def invalidate(self) -> None:
+        """Forget ℓ and J at the current θ (the residual function changed, e.g. a new image batch and
+        GTRA target): the next step evaluates them again. λ and D are kept."""
+        self._J = None
+        self._r = None
+
     def reset(self) -> None:
         """Back to the initial damping and damping matrix (after binding glasses, S4.1.3)."""
         self.damping = self.settings.damping
