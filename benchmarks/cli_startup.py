@@ -27,11 +27,12 @@ def main() -> None:
     trees = {"baseline": args.baseline, "this tree": str(Path(__file__).resolve().parents[1])}
     times: dict[str, list[float]] = {k: [] for k in trees}
     bare: list[float] = []
+    # cwd=tree: "python -c" puts the working directory first on sys.path, before PYTHONPATH.
     for _ in range(args.repeats):
         for name, tree in trees.items():
             env = {**os.environ, "PYTHONPATH": tree}
             t0 = time.perf_counter()
-            subprocess.run([sys.executable, "-c", HELP], env=env, capture_output=True, check=True)
+            subprocess.run([sys.executable, "-c", HELP], env=env, cwd=tree, capture_output=True, check=True)
             times[name].append(time.perf_counter() - t0)
         t0 = time.perf_counter()
         subprocess.run([sys.executable, "-c", "pass"], capture_output=True, check=True)
@@ -39,7 +40,7 @@ def main() -> None:
     print(f"load average {os.getloadavg()[0]:.1f}")
     for name, tree in trees.items():
         env = {**os.environ, "PYTHONPATH": tree}
-        err = subprocess.run([sys.executable, "-c", COUNT], env=env, capture_output=True, text=True).stderr
+        err = subprocess.run([sys.executable, "-c", COUNT], env=env, cwd=tree, capture_output=True, text=True).stderr
         modules, torch = err.strip().splitlines()[-1].split()
         v = times[name]
         print(f"{name} ({tree}): median {statistics.median(v):.3f} s, min {min(v):.3f} s over {len(v)} runs; "
