@@ -72,6 +72,7 @@ def test_huge_integer_and_deep_nesting_are_one_line(tmp_path: Path) -> None:
 @pytest.mark.parametrize("seed", [2**64, -1, 10**30])
 def test_seed_beyond_64_bits(seed: int) -> None:
     assert_one_line_error(*run("trace", COOKE, "--seed", seed), "--seed")
+    assert_one_line_error(*run("tolerance", COOKE, "--profile", "s6.2", "--trials", "2", "--seed", seed), "--seed")
 
 
 # ------------------------------------------------------------------------------------- output paths
