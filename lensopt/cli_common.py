@@ -192,7 +192,7 @@ class LensoptGroup(TyperGroup):
         try:
             with _signal_handlers():
                 rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
-            code = rv if isinstance(rv, int) else 0
+            code = rv if isinstance(rv, int) and not isinstance(rv, bool) else 0
             if code == EX_SIGINT:  # typer turns a KeyboardInterrupt outside the commands into exit 130
                 code = report_signal()
         except getattr(click_exc, "NoArgsIsHelpError", ()) as err:  # `lensopt`, `lensopt plot`: the help
