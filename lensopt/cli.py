@@ -440,7 +440,7 @@ def simulate(
     backend: BackendOpt = "auto",
 ) -> None:
     """Simulate a scene through the lens, computing only the effects the scene calls for."""
-    from lensopt.cli_imaging import parse_grid, run_simulate
+    from lensopt.cli_imaging import parse_grid, render_plan, render_run, run_simulate
     from lensopt.resources import require
 
     psf_grid = parse_grid(grid)
@@ -455,45 +455,11 @@ def simulate(
         raise LensoptError("must lie in [0, 1)", path="--overlap", got=overlap)
     result = run_simulate(load_model(lens), image, output, region=region, effects=effects, reference=reference,
                           plan_only=plan_only, sampling=rays, kernel=kernel, grid=psf_grid, overlap=overlap,
-                          seed=seed, on_plan=None if as_json else _render_plan, score=score)
+                          seed=seed, on_plan=None if as_json else render_plan, score=score)
     if as_json:
         print_json(result)
     elif not plan_only:
-        _render_run(result)
-
-
-def _render_plan(p: dict[str, Any]) -> None:
-    t = _table(title=f"plan — {p['lens']}: {p['image']['width']}×{p['image']['height']} "
-                    f"{'/'.join(p['channels'])} ({p['image']['encoding']}) on region {p['region']['name']} "
-                    f"({p['region']['w']:.0f}×{p['region']['h']:.0f} sensor px, image pixel {p['pixel_um']:.2f} µm)",
-              show_header=False)
-    t.add_row("wavelengths", ", ".join(f"{w:g}" for w in p["wavelengths_nm"]) + " nm")
-    t.add_row("fields traced", ", ".join(f"{f:.2f}°" for f in p["fields_deg"]) or "none")
-    grid = p["psf_grid"]
-    t.add_row("PSF grid", f"{grid[0]}×{grid[1]}, overlap {p['overlap']:.0%}" if grid else "none")
-    ps = p["psf"]
-    t.add_row("PSFs", f"{ps['sampling']}, {ps['kernel']} kernel, bins {ps['pitch_um']:.2f} µm"
-                      + (", resized to the image pixel" if ps["resize_to_pixel"] else ""))
-    for name, e in p["effects"].items():
-        t.add_row(name, f"[{'green' if e['on'] else 'dim'}]{'on' if e['on'] else 'off'}[/] — {e['reason']}")
-    for note in p["notes"]:
-        t.add_row("note", note)
-    console.print(t)
-
-
-def _render_run(r: dict[str, Any]) -> None:
-    t = _table(title="stages")
-    t.add_column("stage")
-    t.add_column("s", justify="right")
-    for k, v in r["timings"].items():
-        t.add_row(k, f"{v:.3f}")
-    console.print(t)
-    m = r.get("metrics")
-    if m:
-        psnr = "∞ (identical)" if m["psnr_db"] == math.inf else f"{m['psnr_db']:.2f} dB"
-        ssim = f"{m['ssim']:.4f}" if math.isfinite(m["ssim"]) else "— (image smaller than the 11-pixel window)"
-        console.print(f"vs {m['against']}: PSNR {psnr}, SSIM {ssim} ({m['space']})")
-    err_console.print(f"wrote {r['output']} ({r['output_encoding']}; input {r['input_encoding']})", highlight=False)
+        render_run(result)
 
 
 # ------------------------------------------------------------------------------------- plot psf

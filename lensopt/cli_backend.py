@@ -22,7 +22,7 @@ def with_backend(err_console: Console) -> Callable[[F], F]:
     def decorate(fn: F) -> F:
         @functools.wraps(fn)
         def wrapper(*args: Any, **kwargs: Any) -> Any:
-            from lensopt.optics.backend import on_compile, use_backend  # torch: only when the command runs
+            from lensopt.optics.backend import on_compile, use_backend  # torch: imported when a command runs
 
             remove = on_compile(lambda desc, s: err_console.print(
                 f"compiled the trace for {desc} in {s:.1f} s (first time on this machine; cached on disk)",

@@ -33,7 +33,7 @@ except ImportError:  # pragma: no cover
 
 from lensopt.errors import LensoptError
 
-__all__ = ["AimOpt", "AimStepsOpt", "EX_INTERNAL", "JsonOpt", "LensArg", "SamplingOpt", "SeedOpt",
+__all__ = ["AimOpt", "AimStepsOpt", "check_seed", "EX_INTERNAL", "JsonOpt", "LensArg", "SamplingOpt", "SeedOpt",
            "Terminated", "check_output", "console", "err_console", "handle_errors", "LensoptGroup",
            "report_signal", "signals_deferred", "state", "print_json", "LowerLevelFormatter"]
 
@@ -59,7 +59,8 @@ console = Console(width=None if sys.stdout.isatty() else 160)
 err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 1000)
 
 
-def _check_seed(value: int | None) -> int | None:
+def check_seed(value: int | None) -> int | None:
+    """typer callback: a seed torch and numpy accept (0 … 2**63 − 1)."""
     if value is not None and not 0 <= value < 2**63:
         raise typer.BadParameter(f"must be an integer from 0 to 2**63 - 1 (got {value})")
     return value
@@ -70,7 +71,7 @@ SamplingOpt = Annotated[str, typer.Option("--sampling", help="Pupil sampling: ri
 AimOpt = Annotated[str | None, typer.Option("--aim", help="Ray aiming: none | chief | full (default: the spec's).")]
 AimStepsOpt = Annotated[int | None, typer.Option("--aim-steps",
                                                  help="Newton steps of full aiming (default: the spec's).")]
-SeedOpt = Annotated[int, typer.Option("--seed", callback=_check_seed,
+SeedOpt = Annotated[int, typer.Option("--seed", callback=check_seed,
                                       help="Seed of every random draw (pupil jitter), 0 to 2**63 - 1.")]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object instead of tables.")]
 
@@ -191,7 +192,7 @@ class LensoptGroup(TyperGroup):
         try:
             with _signal_handlers():
                 rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
-            code = rv if isinstance(rv, int) else 0
+            code = rv if isinstance(rv, int) and not isinstance(rv, bool) else 0
             if code == EX_SIGINT:  # typer turns a KeyboardInterrupt outside the commands into exit 130
                 code = report_signal()
         except getattr(click_exc, "NoArgsIsHelpError", ()) as err:  # `lensopt`, `lensopt plot`: the help

@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import re
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -21,7 +22,7 @@ from lensopt.imaging.simulate import plan_scene, run_plan
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec.build import Model, camera_of
 
-__all__ = ["parse_grid", "run_simulate", "plot_psfs"]
+__all__ = ["parse_grid", "run_simulate", "plot_psfs", "render_plan", "render_run"]
 
 
 def parse_grid(text: str | None) -> tuple[int, int] | None:
@@ -60,11 +61,14 @@ def run_simulate(
     if kernel not in KERNELS:
         raise LensoptError(f"must be one of {', '.join(KERNELS)}", path="--kernel", got=kernel)
     PupilSampling.parse(sampling, path="--rays")
+    # Every stage is timed, reading and writing included, so that the table accounts for the wall time.
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
     img, info = read_image(image_path, option="IMAGE")
+    timings["read image"] = time.perf_counter() - t0
     opts = PlanOptions(sampling=sampling, kernel=kernel, grid=grid, overlap=overlap, seed=seed)
     image_info = {"width": info.width, "height": info.height, "channels": info.channels, "bits": info.bits,
                   "encoding": info.encoding, "format": info.format, "path": str(image_path)}
-    timings: dict[str, float] = {}
     camera = camera_of(model)
     plan, pilot, reg, sensor = plan_scene(camera, image_info, region=region, effects=parse_effects(effects),
                                           options=opts, timings=timings)
@@ -76,11 +80,14 @@ def run_simulate(
     assert output is not None  # checked by the caller
     with torch.inference_mode():
         res = run_plan(camera, plan, pilot, reg, sensor, img, opts, timings)
+    t0 = time.perf_counter()
     encoding = write_image(output, res.image, info)
+    timings["write image"] = time.perf_counter() - t0
     metrics = None
     if reference is not None or score:
         from lensopt.imaging.metrics import psnr, ssim  # skimage (and scipy) only when scoring
 
+        t0 = time.perf_counter()
         if reference is not None:
             ref, _ = read_image(reference, option="--reference")
             if ref.shape != res.image.shape:
@@ -91,6 +98,7 @@ def run_simulate(
             ref, against = img, "the input scene"
         metrics = {"against": against, "psnr_db": psnr(linear_to_srgb(ref), linear_to_srgb(res.image)),
                    "ssim": ssim(linear_to_srgb(ref), linear_to_srgb(res.image)), "space": "sRGB-encoded [0, 1]"}
+        timings["scores (PSNR, SSIM)"] = time.perf_counter() - t0
     return {"plan": plan_json, "timings": timings, "output": str(output), "output_encoding": encoding,
             "input_encoding": f"{info.encoding} {info.bits}-bit {'float' if info.is_float else 'integer'}"
                               + (" (linearized)" if info.encoding == "sRGB" else ""),
@@ -123,3 +131,49 @@ def plot_psfs(model: Model, output: Path, *, sampling: str = "rings:32", kernel:
         b = trace_bundle(lens, system, ps.points(dtype=lens.dtype), half_pupil=ps.half, rel_field=rel)
         rms = (spot_stats(b, system.wavelength_weights).rms_radius * 1e3).tolist()
     save_psf_figure(output, stack, ww, title=spec.name, sqrt=sqrt, rms_um=rms, dpi=dpi)
+
+
+def render_plan(p: dict[str, Any]) -> None:
+    """The simulation plan as a table (before the run)."""
+    from rich.table import Table
+
+    from lensopt.cli_common import console
+
+    t = Table(title=f"plan — {p['lens']}: {p['image']['width']}×{p['image']['height']} "
+                    f"{'/'.join(p['channels'])} ({p['image']['encoding']}) on region {p['region']['name']} "
+                    f"({p['region']['w']:.0f}×{p['region']['h']:.0f} sensor px, image pixel {p['pixel_um']:.2f} µm)",
+              show_header=False)
+    t.add_row("wavelengths", ", ".join(f"{w:g}" for w in p["wavelengths_nm"]) + " nm")
+    t.add_row("fields traced", ", ".join(f"{f:.2f}°" for f in p["fields_deg"]) or "none")
+    grid = p["psf_grid"]
+    t.add_row("PSF grid", f"{grid[0]}×{grid[1]}, overlap {p['overlap']:.0%}" if grid else "none")
+    ps = p["psf"]
+    t.add_row("PSFs", f"{ps['sampling']}, {ps['kernel']} kernel, bins {ps['pitch_um']:.2f} µm"
+                      + (", resized to the image pixel" if ps["resize_to_pixel"] else ""))
+    for name, e in p["effects"].items():
+        t.add_row(name, f"[{'green' if e['on'] else 'dim'}]{'on' if e['on'] else 'off'}[/] — {e['reason']}")
+    for note in p["notes"]:
+        t.add_row("note", note)
+    console.print(t)
+
+
+def render_run(r: dict[str, Any]) -> None:
+    """Stage timings, scores and the file written."""
+    import math
+
+    from rich.table import Table
+
+    from lensopt.cli_common import console, err_console
+
+    t = Table(title="stages")
+    t.add_column("stage")
+    t.add_column("s", justify="right")
+    for k, v in r["timings"].items():
+        t.add_row(k, f"{v:.3f}")
+    console.print(t)
+    m = r.get("metrics")
+    if m:
+        psnr = "∞ (identical)" if m["psnr_db"] == math.inf else f"{m['psnr_db']:.2f} dB"
+        ssim = f"{m['ssim']:.4f}" if math.isfinite(m["ssim"]) else "— (image smaller than the 11-pixel window)"
+        console.print(f"vs {m['against']}: PSNR {psnr}, SSIM {ssim} ({m['space']})")
+    err_console.print(f"wrote {r['output']} ({r['output_encoding']}; input {r['input_encoding']})", highlight=False)

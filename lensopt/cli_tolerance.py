@@ -197,6 +197,7 @@ def register(app: typer.Typer, plot_app: typer.Typer) -> None:
         load_model,
         print_json,
     )
+    from lensopt.cli_common import check_seed
 
     @app.command("tolerance")
     @handle_errors
@@ -206,7 +207,8 @@ def register(app: typer.Typer, plot_app: typer.Typer) -> None:
                                                         "table (default: the spec's [tolerance]).")] = None,
         profile: Annotated[str | None, typer.Option("--profile", help="Named tolerance set: s6.2.")] = None,
         trials: Annotated[int | None, typer.Option("--trials", min=0, help="Monte-Carlo trials (0: none).")] = None,
-        seed: Annotated[int | None, typer.Option("--seed", help="Seed of the draws and the pupil jitter.")] = None,
+        seed: Annotated[int | None, typer.Option("--seed", callback=check_seed,
+                                                     help="Seed of the draws and the pupil jitter.")] = None,
         metric: Annotated[str | None, typer.Option("--metric", help="esr | rms | mtf | distortion.")] = None,
         mtf_frequency: Annotated[float | None, typer.Option("--mtf-frequency", help="cycles/mm of the MTF "
                                                             "metric.")] = None,

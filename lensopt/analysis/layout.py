@@ -42,6 +42,7 @@ class Layout:
         rays: (F, R, S+2, 2) meridional ray paths as (z, y): start, surfaces 1…S, image, mm.
         reached: (F, R, S+2) bool, the ray got to that point (a failed ray stops where it failed).
         image_half_height: () half height of the image surface to draw, mm.
+        front_aperture: (z from surface 1, semi-diameter) of the system's front aperture, mm, if any.
     """
 
     vertex_z: Tensor
@@ -57,6 +58,7 @@ class Layout:
     rays: Tensor
     reached: Tensor
     image_half_height: Tensor
+    front_aperture: tuple[float, float] | None = None
 
 
 def layout(model: LensModel, *, aim: str | None = None, rays_per_field: int = 7, samples: int = 101) -> Layout:
@@ -115,6 +117,8 @@ def layout(model: LensModel, *, aim: str | None = None, rays_per_field: int = 7,
         rays=torch.stack([path[..., 2], path[..., 1]], -1),
         reached=reached_t,
         image_half_height=1.05 * half_height,
+        front_aperture=(None if system.front_aperture is None else
+                        (float(system.front_aperture.distance), 0.5 * float(system.front_aperture.diameter))),
     )
 
 

@@ -21,8 +21,8 @@ def plot_layout(data: Layout, *, title: str | None = None, subtitle: str | None 
     """Draw ``data`` (from :func:`lensopt.analysis.layout.layout`) to scale, z to the right, y up.
 
     Elements are filled between their two faces (each drawn to its own semi-diameter, joined by flat
-    flanges at the larger one); the aperture stop is marked by two bars at its semi-diameter; rays
-    are coloured per field.
+    flanges at the larger one); the aperture stop is marked by two bars at its semi-diameter (STO), a
+    front aperture likewise (FA, below the axis); rays are coloured per field.
     """
     vz = data.vertex_z.numpy()
     sd = data.semi_diameter.numpy()
@@ -31,9 +31,10 @@ def plot_layout(data: Layout, *, title: str | None = None, subtitle: str | None 
     num_s = len(sd)
     img_h = float(data.image_half_height)
 
-    z_lo = float(min(rays[..., 0].min(), pz.min()))
+    fa = data.front_aperture
+    z_lo = float(min(rays[..., 0].min(), pz.min(), fa[0] if fa else np.inf))
     z_hi = float(vz[-1])
-    y_hi = float(max(sd.max() * 1.3, img_h))
+    y_hi = float(max(sd.max() * 1.3, img_h, 1.3 * fa[1] if fa else 0.0))
     span_z = z_hi - z_lo
     width = 10.0
     aspect = (2.24 * y_hi) / (1.08 * span_z)  # data height / width of the axes box
@@ -73,6 +74,14 @@ def plot_layout(data: Layout, *, title: str | None = None, subtitle: str | None 
             ax.plot([z_edge, z_edge], [sign * h, sign * (h + bar)], color="black", lw=2.4,
                     solid_capstyle="butt", zorder=5)
         ax.text(z_edge, h + bar, "STO", ha="center", va="bottom", fontsize=7, zorder=5)
+
+        # Front aperture (object space): bars from its opening outwards.
+        if fa:
+            fa_bar = 0.22 * fa[1] + 0.04 * y_hi
+            for sign in (1.0, -1.0):
+                ax.plot([fa[0], fa[0]], [sign * fa[1], sign * (fa[1] + fa_bar)], color="0.25", lw=2.0,
+                        solid_capstyle="butt", zorder=5)
+            ax.text(fa[0], -(fa[1] + fa_bar), "FA", ha="center", va="top", fontsize=7, zorder=5)
 
         # Image surface and optical axis.
         ax.plot([vz[-1], vz[-1]], [-img_h, img_h], color="black", lw=1.4, zorder=5)

@@ -73,6 +73,7 @@ def test_huge_integer_and_deep_nesting_are_one_line(tmp_path: Path) -> None:
 @pytest.mark.parametrize("seed", [2**64, -1, 10**30])
 def test_seed_beyond_64_bits(seed: int) -> None:
     assert_one_line_error(*run("trace", COOKE, "--seed", seed), "--seed")
+    assert_one_line_error(*run("tolerance", COOKE, "--profile", "s6.2", "--trials", "2", "--seed", seed), "--seed")
 
 
 # ------------------------------------------------------------------------------------- output paths
@@ -429,3 +430,13 @@ def test_timeout_term_leaves_a_valid_cmount_lens(tmp_path: Path) -> None:
     r = subprocess.run(cmd, capture_output=True, text=True, env=ENV, timeout=300)
     assert r.returncode == 143 and "Traceback" not in r.stderr, r.stderr
     _check_lens_dir(tmp_path, "x.json")
+
+
+def test_telephoto_layout_carries_its_front_aperture(tmp_path: Path) -> None:
+    from lensopt.analysis.layout import layout
+    from lensopt.spec import build
+
+    spec = load_spec(ROOT / "specs" / "telephoto_plastic.toml")
+    fa = spec.system.front_aperture
+    assert layout(build(spec), rays_per_field=3).front_aperture == (fa.distance, fa.diameter / 2)
+    assert layout(build(load_spec(COOKE)), rays_per_field=3).front_aperture is None

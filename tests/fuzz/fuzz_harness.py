@@ -74,9 +74,8 @@ SCALE = float(os.environ.get("LENSOPT_FUZZ_SCALE", "1"))
 HANG_S = 60
 TALLY: Counter[str] = Counter()
 runner = CliRunner()
-# typer rebuilds the click command for every invoke (~50 ms); build it once.
+# typer rebuilds the click command for every invoke (~50 ms); the fuzzers build it once (see invoke).
 _COMMAND = typer_testing._get_command(app)
-typer_testing._get_command = lambda a: _COMMAND if a is app else _build(a)  # type: ignore[assignment]
 
 
 def fuzz_settings(examples: int) -> settings:
@@ -103,9 +102,11 @@ def invoke(args: list[Any], folder: Path | None = None, *, json_out: bool = Fals
     args = [str(a) for a in args]
     old = signal.signal(signal.SIGALRM, _alarm)
     signal.alarm(HANG_S)
+    typer_testing._get_command = lambda a: _COMMAND if a is app else _build(a)  # type: ignore[assignment]
     try:
         r = runner.invoke(app, args)
     finally:
+        typer_testing._get_command = _build
         signal.alarm(0)
         signal.signal(signal.SIGALRM, old)
     out, err = r.stdout, r.stderr

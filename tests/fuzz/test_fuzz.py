@@ -1,7 +1,9 @@
 """Fuzzing every command with hypothesis: mutated TOML specs, arbitrary and mutated JSON lenses, CODE V
 text, image files and command-line arguments (the contract is checked by ``conftest.invoke``).
 
-Counts per test are chosen so that ``make test`` runs ≥ 1000 examples in well under 2 minutes.
+Counts per test are chosen so that ``make test`` runs ≥ 1000 examples in well under 2 minutes (every
+command: trace, ray, plot *, simulate, optimize, import/export CODE V and Zemax, and bad input of check,
+accuracy and tolerance).
 """
 
 from __future__ import annotations
@@ -135,6 +137,29 @@ def test_fuzz_codev_import(lines: list[str]) -> None:
         invoke(["trace", folder / "lens.json", "--sampling", "rings:2", "--json"], folder, json_out=True)
 
 
+ZEMAX_LINES = ["VERS 140730 73 26155", "MODE SEQ", "MODE NSC", "NAME fuzz", "UNIT MM X W X CM MR CPMM", "UNIT IN",
+               "FNUM 2.1 0", "ENPD 10", "ENPD -1", "ENPD 1e308", "FTYP 0 0 3 3 0 0 0", "FTYP 3 0 3 3 0 0 0",
+               "FTYP 9 9", "YFLN 0 8.0 13.6", "YFLN 0 89.99", "XFLN 0 0 0", "WAVM 1 0.55 1", "WAVM 2 -1 1",
+               "WAVM 1 nan 1", "PWAV 1", "PWAV 9", "GCAT SCHOTT", "SURF 0", "SURF 1", "SURF 2", "SURF 3", "SURF 99",
+               "  TYPE STANDARD", "  TYPE EVENASPH", "  TYPE COORDBRK", "  TYPE TOROIDAL", "  CURV 0.02",
+               "  CURV 0.0 0 0 0 0 \"\"", "  CURV 1e308", "  CURV nan", "  DISZ 5", "  DISZ INFINITY", "  DISZ -1e308",
+               "  GLAS N-BK7 0 0 1.5 60", "  GLAS NOPE 0 0 0 0", "  GLAS MIRROR", "  DIAM 5", "  DIAM -3", "  STOP",
+               "  CONI -1", "  CONI inf", "  PARM 1 0.5", "  PARM 99 1", "  PARM 2", "  SQAP 1 1", "  FLAP 0 5 0",
+               "  PZUP 1 1 0 0", "  MIRR 2 0", "SURF", "CURV", "", "GLAS", "TOL TOFF"]
+
+
+@fuzz_settings(120)
+@given(lines=st.lists(st.one_of(st.sampled_from(ZEMAX_LINES), st.text(max_size=20)), min_size=0, max_size=30),
+       utf16=st.booleans())
+def test_fuzz_zemax_import(lines: list[str], utf16: bool) -> None:
+    folder = _tmp()
+    zmx = folder / "lens.zmx"
+    zmx.write_bytes("\r\n".join(lines).encode("utf-16" if utf16 else "utf-8", errors="replace"))
+    code, _, _ = invoke(["import-zemax", zmx, "-o", folder / "lens.json"], folder)
+    if code == 0:
+        invoke(["trace", folder / "lens.json", "--sampling", "rings:2", "--json"], folder, json_out=True)
+
+
 NUM_TEXT = st.one_of(st.sampled_from(["0", "-1", "1e308", "-1e308", "nan", "inf", "-inf", "1e-320", "89.9999",
                                       "90", "x", "", "9" * 40, "-" + "9" * 25, "0x10", "1_000"]),
                      st.floats(-100, 100, allow_nan=False).map(lambda v: f"{v:.3g}"))
@@ -148,7 +173,8 @@ AIM = st.sampled_from(["none"] * 8 + ["chief", "full", "sideways", "", "NONE"]) 
 def cli_args(draw: st.DrawFn, folder: Path) -> tuple[list[str], bool]:
     """(arguments, whether stdout is JSON) for one command with adversarial options."""
     command = draw(st.sampled_from(["trace", "trace", "trace", "ray", "ray", "ray", "plot-layout", "plot-fans",
-                                    "plot-spots", "plot-field", "plot-psf", "export-codev", "optimize", "usage"]))
+                                    "plot-spots", "plot-field", "plot-psf", "plot-mtf", "export-codev", "export-zemax",
+                                    "optimize", "check", "accuracy", "tolerance", "usage"]))
     lens = str(draw(st.sampled_from([COOKE, COOKE, folder / "missing.toml", folder, folder / "x.txt"])))
     suffix = draw(st.sampled_from([".png", ".svg", ".xyz", "", ".json", ".seq", "/"]))
     out = str(folder / f"out{suffix}")
@@ -170,9 +196,20 @@ def cli_args(draw: st.DrawFn, folder: Path) -> tuple[list[str], bool]:
             args += ["--sampling", draw(SAMPLING)]
         if kind == "psf":
             args += ["--rays", draw(SAMPLING), "--pitch-um", draw(NUM_TEXT)]
+        if kind == "mtf":
+            args += ["--method", draw(st.sampled_from(["heuristic", "nope", ""])), "--max-frequency", draw(NUM_TEXT)]
         return args, False
-    if command == "export-codev":
-        return ["export-codev", lens, "-o", out], False
+    if command in ("export-codev", "export-zemax"):
+        return [command, lens, "-o", out], False
+    # Long-running commands get bad input only (a real run is their own tests' business).
+    if command == "check":
+        return ["check", lens, "--baseline", draw(st.sampled_from([lens, str(folder / "x.txt"), out])), "--json"], True
+    if command == "accuracy":
+        return ["accuracy", lens, "--target", draw(st.sampled_from(["x", "-1%", "", "%", "1e999%x"])), "--knobs",
+                draw(st.sampled_from(["nope", "rings,nope", ""])), "--json"], True
+    if command == "tolerance":
+        return ["tolerance", lens, "--metric", draw(st.sampled_from(["bogus", "", "esr2"])), "--trials",
+                draw(st.sampled_from(["-1", "x", "0"])), "--scheduler", "serial", "--json"], True
     if command == "optimize":  # bad input only: a real run is the signal tests' business
         return ["optimize", lens, "-o", out, "--steps", draw(st.sampled_from(["0", "-1", "x"])), "-q"], False
     words = draw(st.lists(st.sampled_from(["--bogus", "-x", "trace", "plot", "nope", "--json", "--", "-o", "--seed",
