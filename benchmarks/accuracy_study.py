@@ -96,21 +96,21 @@ def part_third(results: dict) -> None:
               f"| {'yes' if err <= 0.01 else 'no'} |")
 
 
-def part_commands(repeats: int) -> None:
+def part_commands(repeats: int, lenses: list[str], only: list[str] | None) -> None:
     py = [sys.executable, "-c", "from lensopt.cli import app; app()"]
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "2")}
     tmp = ROOT / "out" / "accuracy_study"
     tmp.mkdir(parents=True, exist_ok=True)
     img = ROOT / "lensopt" / "imaging" / "data" / "coffee.png"
     rows = []
-    for lens in sorted((ROOT / "lenses").glob("*.json")):
-        if lens.name == "check_baseline.json":
-            continue
+    for lens in (ROOT / "lenses" / f"{name}.json" for name in lenses):
         cmds = {"trace rings:32": ["trace", str(lens), "--sampling", "rings:32", "--json"],
                 "trace rings:64": ["trace", str(lens), "--sampling", "rings:64", "--json"],
                 "plot psf": ["plot", "psf", str(lens), "-o", str(tmp / "psf.png")],
                 "simulate": ["simulate", str(lens), str(img), "--region", "corner", "-o", str(tmp / "sim.png")]}
         for name, args in cmds.items():
+            if only is not None and name not in only:
+                continue
             times: dict[str, list[float]] = {}
             for _ in range(repeats):  # interleaved: every backend sees the same load
                 for backend in ("eager", "auto", "compiled"):
@@ -190,6 +190,8 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--part", default="accuracy,third,commands")
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--lenses", default="cooke_triplet_opt,cmount_4p", help="shipped lenses for --part commands")
+    ap.add_argument("--commands", default=None, help="e.g. 'trace rings:32,plot psf,simulate' (default: all)")
     a = ap.parse_args()
     parts = a.part.split(",")
     if "summary" in parts:
@@ -203,7 +205,7 @@ def main() -> None:
     if "commands" in parts:
         print("\n| lens | command | eager s (before) | auto s (default) | compiled s | compiled runs |")
         print("| --- | --- | --- | --- | --- | --- |")
-        part_commands(a.repeats)
+        part_commands(a.repeats, a.lenses.split(","), a.commands.split(",") if a.commands else None)
     if "illumination" in parts:
         part_illumination(401)
     print(f"load after: {os.getloadavg()}")
