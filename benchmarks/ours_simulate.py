@@ -16,10 +16,10 @@ import numpy as np
 import torch
 from procmem import peak_rss_mb
 
-from lensopt.imaging.commands import parse_grid
+from lensopt.cli_imaging import parse_grid
 from lensopt.imaging.plan import PlanOptions, parse_effects
 from lensopt.imaging.simulate import plan_scene, run_plan
-from lensopt.spec import build, load_spec
+from lensopt.spec import build, camera_of, load_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -42,10 +42,10 @@ def main() -> None:
     opts = PlanOptions(sampling=a.rays, grid=parse_grid(a.grid))
     h, w, c = img.shape
     timings: dict[str, float] = {"load lens": time.perf_counter() - t0}
-    plan, pilot, reg, sensor = plan_scene(model, {"width": w, "height": h, "channels": c}, region="full",
+    plan, pilot, reg, sensor = plan_scene(camera_of(model), {"width": w, "height": h, "channels": c}, region="full",
                                           effects=parse_effects(a.effects), options=opts, timings=timings)
     with torch.inference_mode():
-        res = run_plan(model, plan, pilot, reg, sensor, img, opts, timings)
+        res = run_plan(camera_of(model), plan, pilot, reg, sensor, img, opts, timings)
     timings["total"] = time.perf_counter() - t0
     if a.save_grid:
         np.save(a.save_grid, res.psf_grid.numpy())

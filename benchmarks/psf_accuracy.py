@@ -28,7 +28,7 @@ from lensopt.analysis.psf_stack import PsfSettings, compute_psfs
 from lensopt.imaging.io import read_image
 from lensopt.imaging.plan import PlanOptions, parse_effects
 from lensopt.imaging.simulate import plan_scene, run_plan
-from lensopt.spec import build, load_spec
+from lensopt.spec import build, camera_of, load_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -71,10 +71,10 @@ def part_b(model) -> list[dict]:  # type: ignore[no-untyped-def]
 
     def simulate(grid, fields=None):  # type: ignore[no-untyped-def]
         opts = PlanOptions(sampling="rings:32", grid=grid, fields=fields)
-        plan, pilot, reg, sensor = plan_scene(model, info, region="tile:3,0/4x4", effects=parse_effects(None),
-                                              options=opts)
+        plan, pilot, reg, sensor = plan_scene(camera_of(model), info, region="tile:3,0/4x4",
+                                              effects=parse_effects(None), options=opts)
         with torch.inference_mode():
-            return plan, run_plan(model, plan, pilot, reg, sensor, scene, opts).image
+            return plan, run_plan(camera_of(model), plan, pilot, reg, sensor, scene, opts).image
 
     _, ref = simulate((16, 12), 48)
     rows = []

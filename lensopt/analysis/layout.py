@@ -14,13 +14,12 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from lensopt.analysis.report import auto_semi_diameters
+from lensopt.analysis.report import LensModel, auto_semi_diameters
 from lensopt.materials import Air
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import fan
 from lensopt.optics.surfaces import sag
 from lensopt.optics.trace import trace
-from lensopt.spec.build import Model
 
 __all__ = ["Layout", "layout"]
 
@@ -60,7 +59,7 @@ class Layout:
     image_half_height: Tensor
 
 
-def layout(model: Model, *, aim: str | None = None, rays_per_field: int = 7, samples: int = 101) -> Layout:
+def layout(model: LensModel, *, aim: str | None = None, rays_per_field: int = 7, samples: int = 101) -> Layout:
     """Profiles, semi-diameters and traced meridional rays of ``model`` at the reference wavelength.
 
     Args:
@@ -119,7 +118,7 @@ def layout(model: Model, *, aim: str | None = None, rays_per_field: int = 7, sam
     )
 
 
-def _start_points(pos: Tensor, direction: Tensor, vertex: Tensor, model: Model) -> Tensor:
+def _start_points(pos: Tensor, direction: Tensor, vertex: Tensor, model: LensModel) -> Tensor:
     """Where to start drawing object-space rays: the object point when it is near, otherwise a plane
     a little before the first surface (rays launched on the entrance pupil plane are extended back).
 

@@ -1,31 +1,51 @@
 """Plain-data reports of a traced lens (what ``lensopt trace --json`` and ``lensopt ray`` print).
 
 Units in reports: mm for lengths, µm for spot radii, nm for wavelengths, degrees for angles.
+The functions take any ``LensModel`` (a name, the traced lens and system, the media): ``lensopt.spec``'s
+``Model`` is one; no spec (pydantic) is read here.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from typing import Any, Protocol
 
 import torch
 
 from lensopt.analysis.field import field_summary
 from lensopt.analysis.spot import spot_stats
+from lensopt.materials import Material
 from lensopt.optics.bundle import pupil_shape, trace_bundle
+from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling, launch, pupil_grid
 from lensopt.optics.trace import REASONS, Rays, Status, trace
 from lensopt.optics.vignetting import apply_vignetting, outside_front_aperture
-from lensopt.spec.build import Model, build
-from lensopt.spec.models import DiffractiveSurface
 
-__all__ = ["trace_report", "ray_report", "auto_semi_diameters"]
+__all__ = ["LensModel", "trace_report", "ray_report", "auto_semi_diameters", "prescription"]
+
+
+class LensModel(Protocol):
+    """What the reports read: ``lensopt.spec.Model`` satisfies it."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def lens(self) -> Lens: ...
+    @property
+    def system(self) -> System: ...
+    @property
+    def media(self) -> tuple[Material, ...]: ...
+
+
+def _nm(wavelength_um: float) -> float:
+    """µm → nm, rounded so that the spec's 550.0 comes back as 550.0 (not 550.0000000000001)."""
+    return round(wavelength_um * 1e3, 9)
 
 
 def trace_report(
-    model: Model, sampling: PupilSampling, *, aim: str | None = None, aim_steps: int | None = None
+    model: LensModel, sampling: PupilSampling, *, aim: str | None = None, aim_steps: int | None = None
 ) -> dict[str, Any]:
     """First-order data, per-field spot sizes, failures, distortion, relative illumination, pupil
     (vignetting, aiming) data, notes, and the resolved prescription."""
@@ -60,13 +80,18 @@ def trace_report(
                                                                                 "chief"))}
             pupil["aim_converged"] = bool(summary.aim_converged[h].all())
             pupil["aim_rays_traced"] = bool(summary.aim_traced[h].all()) if summary.aim_traced is not None else False
+        # Failed quantities are None (null in JSON, "—" in tables), never 0: a wavelength (or field) where
+        # no ray reaches the image has no spot to measure; the reason is in "failures" and the notes.
+        lit_w = (status == Status.OK).flatten(1).any(-1).tolist()
+        chief_ok = bool(chief.result.status[h, ref, 0] == Status.OK)
         fields.append({
             "relative": system.rel_field[h],
             "angle_deg": math.degrees(math.atan(float(bundle.tan_field[h]))),
-            "rms_spot_radius_um": [1e3 * float(v) for v in stats.rms_radius_w[h]],
-            "rms_spot_radius_weighted_um": 1e3 * float(stats.rms_radius[h]),
-            "centroid_y_mm": float(stats.centroid[h, 1]),
-            "chief_ray_y_mm": float(chief.result.pos[h, ref, 0, 1]),
+            "rms_spot_radius_um": [_finite(1e3 * float(v)) if lit_w[w] else None
+                                   for w, v in enumerate(stats.rms_radius_w[h])],
+            "rms_spot_radius_weighted_um": _finite(1e3 * float(stats.rms_radius[h])) if lit else None,
+            "centroid_y_mm": _finite(float(stats.centroid[h, 1])) if lit else None,
+            "chief_ray_y_mm": _finite(float(chief.result.pos[h, ref, 0, 1])) if chief_ok else None,
             "failed_rays": int((status != Status.OK).sum()),
             "failures": {REASONS[r]: int((status == r).sum()) for r in REASONS if (status == r).any()},
             "backtracking_rays": int(bundle.result.backtrack[h].sum()),
@@ -75,12 +100,12 @@ def trace_report(
             # front aperture blocks the whole beam (nothing gets through).
             "distortion_percent": 100.0 * float(summary.distortion[h]) if lit else None,
             "paraxial_image_height_mm": float(summary.paraxial_height_mm[h]),
-            "relative_illumination": {"three_ray": float(summary.ri_three_ray[h]) if lit or dark else None,
-                                      "std": float(summary.ri_std[h]) if lit or dark else None},
+            "relative_illumination": {"three_ray": _finite(float(summary.ri_three_ray[h])) if lit or dark else None,
+                                      "std": _finite(float(summary.ri_std[h])) if lit or dark else None},
             "vignetting": pupil,
         })
     report: dict[str, Any] = {
-        "name": model.spec.name,
+        "name": model.name,
         "first_order": {
             "efl": float(fo.efl),
             "bfl": float(fo.bfl),
@@ -94,49 +119,60 @@ def trace_report(
             "paraxial_image_height": float(fo.paraxial_image_height),
             "total_track": float(fo.total_track),
         },
-        "wavelengths_nm": list(model.spec.spectrum.wavelengths_nm),
+        "wavelengths_nm": [_nm(float(w)) for w in lens.wavelength_um],
         "wavelength_weights": [float(w) for w in system.wavelength_weights],
-        "reference_nm": model.spec.spectrum.wavelengths_nm[ref],
+        "reference_nm": _nm(float(lens.wavelength_um[ref])),
         "sampling": str(sampling),
         "aim": mode,
         "aim_steps": system.aim_steps,
         "front_aperture": (dataclasses.asdict(system.front_aperture) if system.front_aperture is not None
                            else None),
         "stop_radius_mm": summary.stop_radius_mm,
-        "effective_spot_radius_um": 1e3 * float(stats.effective_radius),
+        "effective_spot_radius_um": (_finite(1e3 * float(stats.effective_radius))
+                                     if all(f["rms_spot_radius_weighted_um"] is not None for f in fields) else None),
         "fields": fields,
         "notes": list(summary.notes),
-        "surfaces": _surfaces(model, sd),
+        "surfaces": prescription(model, sd),
     }
     return report
 
 
-def _surfaces(model: Model, auto_sd: list[float]) -> list[dict[str, Any]]:
+def _finite(v: float) -> float | None:
+    return v if math.isfinite(v) else None
+
+
+def _table(row: torch.Tensor, first_power: int) -> dict[str, float]:
+    return {str(first_power + 2 * j): float(v) for j, v in enumerate(row.tolist()) if v != 0.0}
+
+
+def prescription(model: LensModel, auto_sd: list[float]) -> list[dict[str, Any]]:
+    """The resolved surfaces, read from the traced lens (``auto_sd``: semi-diameters where none is given)."""
     out = []
     lens = model.lens
-    for i, surf in enumerate(model.spec.surfaces):
-        base = surf.base if isinstance(surf, DiffractiveSurface) else surf
+    for i, shape in enumerate(lens.shapes):
         c = float(lens.curvature[i])
+        given = float(lens.semi_diameter[i])
         entry: dict[str, Any] = {
-            "type": surf.type,
+            "type": "diffractive" if shape.diffractive else shape.kind,
             "radius": math.inf if c == 0 else 1.0 / c,
             "thickness": float(lens.thickness[i]),
             "conic": float(lens.conic[i]),
-            "asphere": {str(p): v for p, v in getattr(base, "coefficients", {}).items()},
+            "asphere": _table(lens.asphere[i], 4) if lens.asphere.shape[-1] else {},
             "material": model.media[i + 1].name,
             "index": [float(v) for v in lens.index[i + 1]],
-            "semi_diameter": surf.semi_diameter if surf.semi_diameter is not None else auto_sd[i],
+            "semi_diameter": given if given > 0 else auto_sd[i],
             "stop": i == lens.stop,
         }
-        if isinstance(surf, DiffractiveSurface):
-            entry["base"] = base.type
-            entry["diffractive"] = {**{str(p): v for p, v in surf.phase.items()},
-                                    "design_wavelength_nm": surf.design_wavelength_nm, "order": surf.order}
+        if shape.diffractive:
+            entry["base"] = shape.kind
+            entry["diffractive"] = {**(_table(lens.phase[i], 2) if lens.phase.shape[-1] else {}),
+                                    "design_wavelength_nm": _nm(shape.design_wavelength_um or 0.0),
+                                    "order": shape.order}
         out.append(entry)
     return out
 
 
-def auto_semi_diameters(model: Model, *, aim: str | None = None, n: int = 21) -> list[float]:
+def auto_semi_diameters(model: LensModel, *, aim: str | None = None, n: int = 21) -> list[float]:
     """Clear semi-apertures from traced rays: the largest ray height on each surface over all fields
     and wavelengths (``grid:n`` pupil plus its rim), as optical design programs do when none is given."""
     lens, system = model.lens, model.system
@@ -154,18 +190,17 @@ def auto_semi_diameters(model: Model, *, aim: str | None = None, n: int = 21) ->
 
 
 def ray_report(
-    model: Model, *, field_deg: float, px: float, py: float, wavelength_nm: float, aim: str = "none"
+    model: LensModel, *, field_deg: float, px: float, py: float, wavelength_nm: float, aim: str = "none"
 ) -> dict[str, Any]:
     """One real ray, surface by surface (like CODE V's RSI): position, direction cosines, angles.
 
     The ray is launched like the rays of ``trace_bundle``: relative pupil coordinates on the system's
     paraxial entrance pupil (reference wavelength), whatever ``wavelength_nm`` is.
     """
-    spec = model.spec.model_copy(deep=True)
-    spec.spectrum = spec.spectrum.model_copy(update={
-        "wavelengths_nm": [wavelength_nm], "weights": None, "reference_nm": None, "rgb_weights": None})
-    single = build(spec, dtype=model.lens.dtype)
-    lens, system = single.lens, single.system
+    # The same lens at one wavelength: indices of every medium at that wavelength (as the builder does).
+    wl = torch.tensor([wavelength_nm * 1e-3], dtype=model.lens.dtype, device=model.lens.device)
+    lens = dataclasses.replace(model.lens, wavelength_um=wl, index=torch.stack([m.index(wl) for m in model.media]))
+    system = dataclasses.replace(model.system, wavelength_weights=torch.ones_like(wl), reference=0)
     tan = torch.tensor([math.tan(math.radians(field_deg))], dtype=lens.dtype)
     with torch.no_grad():
         # The entrance pupil (position, diameter) is the system's, at its reference wavelength, for
@@ -184,25 +219,36 @@ def ray_report(
             out = outside_front_aperture(pos, dirs, fa.distance, fa.diameter)
             result = dataclasses.replace(result, status=torch.where(
                 out, torch.full_like(result.status, int(Status.BLOCKED)), result.status))
+    status = int(result.status.reshape(()).item())
+    # Where the ray failed, numbers past the failure are meaningless: None (null, "—"), never shown.
+    failed_at = len(result.hits) + 1
+    if status != 0:
+        failed_at = -1 if status == int(Status.BLOCKED) or result.failed_at is None else int(result.failed_at.item())
+    none3 = {k: None for k in ("x", "y", "z", "L", "M", "N")}
     surfaces = []
     for i, hit in enumerate(result.hits):
         p, d = hit.pos.reshape(3), hit.dir_out.reshape(3)
         aoi = math.degrees(math.acos(min(1.0, math.sqrt(max(0.0, float(hit.cos2_in.reshape(()).item()))))))
         c2o = float(hit.cos2_out.reshape(()).item())
         aor = math.degrees(math.acos(min(1.0, math.sqrt(c2o)))) if c2o >= 0 else None
-        surfaces.append({"surface": i + 1, "x": float(p[0]), "y": float(p[1]), "z": float(p[2]),
-                         "L": float(d[0]), "M": float(d[1]), "N": float(d[2]),
-                         "aoi_deg": aoi, "aor_deg": aor})
+        entry: dict[str, Any] = {"surface": i + 1, "x": float(p[0]), "y": float(p[1]), "z": float(p[2]),
+                                 "L": float(d[0]), "M": float(d[1]), "N": float(d[2]), "aoi_deg": aoi, "aor_deg": aor}
+        if i > failed_at or (i == failed_at and status != int(Status.TIR)):
+            entry.update(none3, aoi_deg=None, aor_deg=None)
+        elif i == failed_at:  # TIR: the ray reaches the surface but does not leave it
+            entry.update(L=None, M=None, N=None, aor_deg=None)
+        surfaces.append(entry)
     img = result.pos.reshape(3)
     d = result.dir.reshape(3)
-    status = int(result.status.reshape(()).item())
+    image = ({"x": float(img[0]), "y": float(img[1]), "z": float(img[2]), "L": float(d[0]), "M": float(d[1]),
+              "N": float(d[2])} if status == 0 else dict(none3))
     return {
         "field_deg": field_deg, "pupil": [float(pupil[0, 0, 0, 0]), float(pupil[0, 0, 0, 1])],
         "wavelength_nm": wavelength_nm, "aim": aim,
         "start": [float(v) for v in rays.pos.reshape(3)],
         "surfaces": surfaces,
-        "image": {"x": float(img[0]), "y": float(img[1]), "z": float(img[2]),
-                  "L": float(d[0]), "M": float(d[1]), "N": float(d[2])},
+        "image": image,
         "status": "ok" if status == 0 else REASONS[Status(status)],
+        "failed_at_surface": None if status == 0 or failed_at < 0 else failed_at + 1,
         "backtracking": bool(result.backtrack.reshape(()).item()),
     }

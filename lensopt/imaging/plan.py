@@ -19,6 +19,8 @@ import numpy as np
 
 from lensopt.errors import LensoptError
 from lensopt.imaging.pilot import Pilot
+from lensopt.imaging.rgb import RULE as RGB_RULE
+from lensopt.imaging.rgb import rgb_weights_from_spectrum
 from lensopt.imaging.scene import Region, Sensor
 
 __all__ = ["Effects", "PlanOptions", "ScenePlan", "parse_effects", "make_plan", "channel_weights", "EFFECT_NAMES"]
@@ -136,8 +138,8 @@ def channel_weights(spectrum: Any, channels: int, wavelengths_nm: list[float]) -
         for col, row in enumerate(order):
             w[row, col] = 1.0
         return w, ["R", "G", "B"], "no spectrum.rgb_weights: the 3 wavelengths taken as R, G, B (longest first)"
-    raise LensoptError(f"needed to simulate an RGB image with {len(wavelengths_nm)} wavelengths "
-                       "(n_w rows of R, G, B weights, each column summing to 1)", path="spectrum.rgb_weights")
+    w = rgb_weights_from_spectrum(wavelengths_nm, spectrum.weights_or_uniform, path="spectrum")
+    return w, ["R", "G", "B"], f"no spectrum.rgb_weights: {RGB_RULE}"
 
 
 def make_plan(
@@ -222,7 +224,8 @@ def make_plan(
     return ScenePlan(
         lens=lens_name,
         image=image,
-        sensor={"pixel_pitch_um": sensor.pitch_mm * 1e3, "resolution": [sensor.width, sensor.height]},
+        sensor={"pixel_pitch_um": round(sensor.pitch_mm * 1e3, 9),  # 7.2, not 7.200000000000001
+                "resolution": [sensor.width, sensor.height]},
         region=region.as_dict(),
         pixel_um=px * 1e3,
         channels=names,

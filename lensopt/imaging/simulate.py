@@ -1,5 +1,6 @@
 """Run a scene plan: PSFs for the planned fields and wavelengths, the PSF grid, the spatially varying
-convolution, and the optional effects, timing each stage."""
+convolution, and the optional effects, timing each stage. Takes a ``Camera`` (plain data; build one from
+a spec with ``lensopt.spec.camera_of``)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,8 @@ import numpy as np
 import torch
 
 from lensopt.analysis.psf_stack import PsfSettings, PsfStack, compute_psfs, select_wavelengths
+from lensopt.errors import LensoptError
+from lensopt.imaging.camera import Camera, ProvidesCamera, as_camera
 from lensopt.imaging.convolve import overlap_add_convolve
 from lensopt.imaging.effects import add_noise, apply_relative_illumination, warp_distortion
 from lensopt.imaging.pilot import Pilot, run_pilot
@@ -20,7 +23,6 @@ from lensopt.imaging.plan import Effects, PlanOptions, ScenePlan, make_plan
 from lensopt.imaging.psf_grid import build_psf_grid, cell_centers_mm, field_weights
 from lensopt.imaging.scene import Region, Sensor, parse_region
 from lensopt.optics.paraxial import first_order
-from lensopt.spec.build import Model
 
 __all__ = ["SimulationResult", "plan_scene", "run_plan", "sensor_of"]
 
@@ -42,40 +44,44 @@ def _timed(timings: dict[str, float], name: str) -> Iterator[None]:
     timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
 
 
-def sensor_of(model: Model, image_w: int, image_h: int) -> tuple[Sensor, list[str]]:
-    """The spec's sensor; without a resolution the image is taken to fill the sensor at its pitch."""
-    from lensopt.errors import LensoptError
-
-    s = model.spec.sensor
-    if s is None:
+def sensor_of(camera: Camera | ProvidesCamera, image_w: int, image_h: int) -> tuple[Sensor, list[str]]:
+    """The camera's sensor; without a resolution the image is taken to fill the sensor at its pitch."""
+    camera = as_camera(camera)
+    if camera.pixel_pitch_um is None:
         raise LensoptError("needed to simulate an image: give [sensor] pixel_pitch_um (and resolution)",
                            path="sensor")
     notes = []
-    if s.resolution is None:
+    pitch_mm = camera.pixel_pitch_um * 1e-3
+    if camera.resolution is None:
         notes.append("sensor.resolution not given: the image is taken to cover the sensor pixel for pixel")
-        return Sensor(s.pixel_pitch_um * 1e-3, image_w, image_h), notes
-    return Sensor(s.pixel_pitch_um * 1e-3, int(s.resolution[0]), int(s.resolution[1])), notes
+        return Sensor(pitch_mm, image_w, image_h), notes
+    return Sensor(pitch_mm, int(camera.resolution[0]), int(camera.resolution[1])), notes
 
 
 def plan_scene(
-    model: Model, image_info: dict[str, Any], *, region: str | None, effects: Effects, options: PlanOptions,
-    timings: dict[str, float] | None = None,
+    camera: Camera | ProvidesCamera, image_info: dict[str, Any], *, region: str | Region | None,
+    effects: Effects, options: PlanOptions, timings: dict[str, float] | None = None, pilot: Pilot | None = None,
 ) -> tuple[ScenePlan, Pilot, Region, Sensor]:
-    """Make the plan (runs only the cheap pilot trace)."""
+    """Make the plan (runs only the cheap pilot trace, or reuses ``pilot`` from an earlier plan of the
+    same camera). ``region``: ``--region`` text or a ``Region`` (e.g. ``TileGrid.region(k)``)."""
     timings = {} if timings is None else timings
-    sensor, notes = sensor_of(model, image_info["width"], image_info["height"])
-    reg = parse_region(region, sensor, image_info["width"], image_info["height"])
-    with _timed(timings, "pilot trace"):
-        pilot = run_pilot(model.lens, model.system, model.system.wavelength_weights)
-    plan = make_plan(lens_name=model.spec.name, spectrum=model.spec.spectrum, sensor=sensor, region=reg,
+    camera = as_camera(camera)
+    sensor, notes = sensor_of(camera, image_info["width"], image_info["height"])
+    reg = region if isinstance(region, Region) else parse_region(region, sensor, image_info["width"],
+                                                                 image_info["height"])
+    if pilot is None:
+        with _timed(timings, "pilot trace"):
+            pilot = run_pilot(camera.lens, camera.system, camera.system.wavelength_weights)
+    plan = make_plan(lens_name=camera.name, spectrum=camera.spectrum, sensor=sensor, region=reg,
                      image=image_info, pilot=pilot, effects=effects, options=options, notes=notes)
     return plan, pilot, reg, sensor
 
 
-def run_plan(model: Model, plan: ScenePlan, pilot: Pilot, region: Region, sensor: Sensor, image: np.ndarray,
-             options: PlanOptions, timings: dict[str, float] | None = None) -> SimulationResult:
+def run_plan(camera: Camera | ProvidesCamera, plan: ScenePlan, pilot: Pilot, region: Region, sensor: Sensor,
+             image: np.ndarray, options: PlanOptions, timings: dict[str, float] | None = None) -> SimulationResult:
     """Simulate ``image`` (H, W, C linear float32) as planned."""
     timings = {} if timings is None else timings
+    camera = as_camera(camera)
     out = torch.from_numpy(np.ascontiguousarray(image, dtype=np.float32)).permute(2, 0, 1).contiguous()
     eff = plan.effects
     px_mm = plan.pixel_um * 1e-3
@@ -87,13 +93,13 @@ def run_plan(model: Model, plan: ScenePlan, pilot: Pilot, region: Region, sensor
             out = apply_relative_illumination(out, pilot, region, sensor)
     grid = stack = None
     if eff["convolution"]["on"]:
-        lens, system = select_wavelengths(model.lens, model.system, plan.wavelength_index)
+        lens, system = select_wavelengths(camera.lens, camera.system, plan.wavelength_index)
         settings = PsfSettings(sampling=options.sampling, kernel=options.kernel, support=options.support,
                                pitch_mm=plan.psf["pitch_um"] * 1e-3, oversample=options.oversample,
                                diffraction="heuristic" if plan.diffraction["on"] else "none", seed=options.seed)
         with _timed(timings, "trace + PSFs"), torch.no_grad():
             rel = torch.tensor(plan.fields_relative, dtype=lens.dtype)
-            fo = first_order(model.lens, model.system)
+            fo = first_order(camera.lens, camera.system)
             stack = compute_psfs(lens, system, rel, settings, fo=fo)
         with _timed(timings, "PSF grid"), torch.no_grad():
             radius = np.abs(stack.center[:, 1].numpy())

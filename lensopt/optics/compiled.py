@@ -73,6 +73,8 @@ def compiled_trace(
     Compilation takes tens of seconds the first time per structure (Inductor caches kernels on
     disk, so later processes are faster); use it when the trace is called on ≳1e5 rays or many times.
     """
+    if lens.placement is not None:  # decentered/tilted lenses: the eager trace (not compiled yet)
+        return trace(lens, rays, upto=upto, record=record, newton_iterations=newton_iterations)
     key: _Key = (lens.shapes, lens.stop, upto, record, newton_iterations, lens.dtype, lens.device)
     fn = _cache.get(key)
     if fn is None:

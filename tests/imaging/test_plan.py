@@ -12,7 +12,7 @@ from lensopt.errors import LensoptError
 from lensopt.imaging.plan import PlanOptions, parse_effects
 from lensopt.imaging.scene import parse_region
 from lensopt.imaging.simulate import plan_scene
-from lensopt.spec import build, load_spec
+from lensopt.spec import build, camera_of, load_spec
 
 SPECS = Path(__file__).resolve().parents[2] / "specs"
 
@@ -25,7 +25,8 @@ def cooke():
 def plan_for(model, w: int, h: int, channels: int, region: str | None = None, effects: str | None = None,
              **opts):
     info = {"width": w, "height": h, "channels": channels}
-    plan, *_ = plan_scene(model, info, region=region, effects=parse_effects(effects), options=PlanOptions(**opts))
+    plan, *_ = plan_scene(camera_of(model), info, region=region, effects=parse_effects(effects),
+                          options=PlanOptions(**opts))
     return plan.as_json()
 
 

@@ -10,7 +10,7 @@ from imaging_lenses import oval_model
 
 from lensopt.imaging.plan import PlanOptions, parse_effects
 from lensopt.imaging.simulate import plan_scene, run_plan
-from lensopt.spec import build, load_spec
+from lensopt.spec import build, camera_of, load_spec
 
 SPECS = Path(__file__).resolve().parents[2] / "specs"
 
@@ -81,3 +81,12 @@ def test_relative_illumination_and_distortion_effects() -> None:
     plan, res = simulate(cooke, ramp, region="corner", effects="-convolution,distortion")
     assert plan.effects["distortion"]["on"] and not np.array_equal(res.image, ramp)
     assert np.isfinite(res.image).all()
+
+
+def test_a_built_model_or_its_camera_give_the_same_image() -> None:
+    # The core takes a plain Camera; a built model is accepted through model.camera() (no spec import below).
+    model = build(load_spec(SPECS / "cooke_triplet.toml"))
+    img = scene(24, 32, 3)
+    a = simulate(model, img, region="corner")[1].image
+    b = simulate(camera_of(model), img, region="corner")[1].image
+    assert np.array_equal(a, b)

@@ -1,5 +1,6 @@
-"""What ``lensopt simulate`` and ``lensopt plot psf`` do, as library calls returning plain data
-(the CLI only parses options and renders)."""
+"""CLI glue for ``lensopt simulate`` and ``lensopt plot psf``: spec in, library calls, plain data out
+(``lensopt.cli`` parses options and renders). Lives in the CLI layer: it reads the spec and imports
+``plot``; the imaging core below takes a ``Camera``."""
 
 from __future__ import annotations
 
@@ -8,7 +9,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 
 from lensopt.analysis.psf import KERNELS
@@ -20,7 +20,7 @@ from lensopt.imaging.metrics import psnr, ssim
 from lensopt.imaging.plan import PlanOptions, channel_weights, parse_effects
 from lensopt.imaging.simulate import plan_scene, run_plan
 from lensopt.optics.sampling import PupilSampling
-from lensopt.spec.build import Model
+from lensopt.spec.build import Model, camera_of
 
 __all__ = ["parse_grid", "run_simulate", "plot_psfs"]
 
@@ -63,7 +63,8 @@ def run_simulate(
     image_info = {"width": info.width, "height": info.height, "channels": info.channels, "bits": info.bits,
                   "encoding": info.encoding, "format": info.format, "path": str(image_path)}
     timings: dict[str, float] = {}
-    plan, pilot, reg, sensor = plan_scene(model, image_info, region=region, effects=parse_effects(effects),
+    camera = camera_of(model)
+    plan, pilot, reg, sensor = plan_scene(camera, image_info, region=region, effects=parse_effects(effects),
                                           options=opts, timings=timings)
     plan_json = plan.as_json()
     if on_plan is not None:
@@ -72,7 +73,7 @@ def run_simulate(
         return plan_json
     assert output is not None  # checked by the caller
     with torch.inference_mode():
-        res = run_plan(model, plan, pilot, reg, sensor, img, opts, timings)
+        res = run_plan(camera, plan, pilot, reg, sensor, img, opts, timings)
     encoding = write_image(output, res.image, info)
     metrics = None
     if reference is not None:
@@ -93,7 +94,7 @@ def run_simulate(
 
 def plot_psfs(model: Model, output: Path, *, sampling: str = "rings:32", kernel: str = "triangular",
               diffraction: str = "heuristic", pitch_um: float | None = None, sqrt: bool = False,
-              seed: int = 0) -> None:
+              seed: int = 0, dpi: int = 150) -> None:
     """RGB PSFs at the spec's fields, bins of ``pitch_um`` (default: the sensor pitch, else 1 µm)."""
     from lensopt.plot.psf import save_psf_figure
 
@@ -109,14 +110,11 @@ def plot_psfs(model: Model, output: Path, *, sampling: str = "rings:32", kernel:
     with torch.no_grad():
         stack = compute_psfs(lens, system, rel, settings)
     wl = list(spec.spectrum.wavelengths_nm)
-    if spec.spectrum.rgb_weights is not None or len(wl) == 3:
-        ww, _, _ = channel_weights(spec.spectrum, 3, wl)
-    else:  # no colour mapping: show the spectrum-weighted sum in gray
-        ww = np.repeat(channel_weights(spec.spectrum, 1, wl)[0], 3, axis=1)
+    ww, _, _ = channel_weights(camera_of(model).spectrum, 3, wl)  # rgb_weights, 3 wavelengths, or S4.1.2
     from lensopt.optics.bundle import trace_bundle
 
     ps = PupilSampling.parse(sampling, seed=seed, path="--rays")
     with torch.no_grad():
         b = trace_bundle(lens, system, ps.points(dtype=lens.dtype), half_pupil=ps.half, rel_field=rel)
         rms = (spot_stats(b, system.wavelength_weights).rms_radius * 1e3).tolist()
-    save_psf_figure(output, stack, ww, title=spec.name, sqrt=sqrt, rms_um=rms)
+    save_psf_figure(output, stack, ww, title=spec.name, sqrt=sqrt, rms_um=rms, dpi=dpi)

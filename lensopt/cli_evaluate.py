@@ -1,0 +1,97 @@
+"""``lensopt evaluate LENS [--images DIR]``: pre-restoration PSNR/SSIM of a lens (seed S4.3.1).
+
+CLI layer: parses options, calls ``lensopt.imaging.evaluate``, renders with rich. ``register(app)`` is
+called from the bottom of ``lensopt.cli``. (No ``from __future__ import annotations`` here: typer reads the
+command's annotations, which name the option types imported inside ``register``.)
+"""
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.table import Table
+
+from lensopt.errors import LensoptError
+
+__all__ = ["register"]
+
+
+def register(app: typer.Typer) -> None:
+    """Add the ``evaluate`` command to ``app``."""
+    from lensopt.cli import JsonOpt, LensArg, SeedOpt, console, err_console, handle_errors, load_model, print_json
+
+    @app.command()
+    @handle_errors
+    def evaluate(
+        lens: LensArg,
+        images: Annotated[Path | None, typer.Option("--images", help="Folder of PNG/JPEG/TIFF/EXR images (DIV2K: "
+                                                    "its valid_HR/); default: procedural dead-leaves scenes.")] = None,
+        count: Annotated[int, typer.Option("--count", help="Number of scenes (images: the first N by name).")] = 100,
+        patch: Annotated[int, typer.Option("--patch", help="Central crop and sensor tile size, pixels.")] = 256,
+        rays: Annotated[str, typer.Option("--rays", help="Pupil sampling per PSF (rings:N = 2N² rays).")] = "rings:32",
+        kernel: Annotated[str, typer.Option("--kernel", help="count | triangular | cosine (S1.4).")] = "triangular",
+        grid: Annotated[str | None, typer.Option("--grid", help="Force the PSF grid per tile, e.g. 3x3 "
+                                                 "(default: the simulation plan's choice).")] = None,
+        noise: Annotated[float, typer.Option("--noise", help="Additive Gaussian noise σ, fraction of the maximum "
+                                             "(the seed's training value: 0.005).")] = 0.0,
+        rings: Annotated[int, typer.Option("--rings", help="Rings of relative tile radius in the breakdown.")] = 4,
+        seed: SeedOpt = 0,
+        as_json: JsonOpt = False,
+    ) -> None:
+        """Pre-restoration PSNR and SSIM of central crops, each paired with a sensor tile (S4.3.1)."""
+        from lensopt.cli_imaging import parse_grid
+        from lensopt.imaging.evaluate import evaluate as run_evaluate
+        from lensopt.imaging.evaluate import scene_source
+        from lensopt.imaging.plan import PlanOptions
+        from lensopt.optics.sampling import PupilSampling
+        from lensopt.spec import camera_of
+
+        if patch < 8:
+            raise LensoptError("must be at least 8 pixels", path="--patch", got=patch)
+        PupilSampling.parse(rays, path="--rays")
+        from lensopt.analysis.psf import KERNELS
+
+        if kernel not in KERNELS:
+            raise LensoptError(f"must be one of {', '.join(KERNELS)}", path="--kernel", got=kernel)
+        from lensopt.imaging.regions import tile_grid
+        from lensopt.imaging.simulate import sensor_of
+
+        camera = camera_of(load_model(lens))
+        tile_grid(sensor_of(camera, patch, patch)[0], patch, option="--patch")  # bad sensor/patch: before the bar
+        scenes, names, desc = scene_source(images, count=count, patch=patch, seed=seed)
+        options = PlanOptions(sampling=rays, kernel=kernel, grid=parse_grid(grid), seed=seed)
+        with Progress(TextColumn("evaluating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      TimeRemainingColumn(), console=err_console, transient=True, disable=as_json) as bar:
+            task = bar.add_task("scenes", total=len(names))
+            result = run_evaluate(camera, scenes, names, patch=patch, seed=seed, options=options,
+                                  noise_sigma=noise, rings=rings, images=desc,
+                                  progress=lambda done, total: bar.update(task, completed=done))
+        if as_json:
+            print_json(result.as_json())
+        else:
+            _render(console, result.as_json())
+
+
+def _render(console: Any, r: dict[str, Any]) -> None:
+    s = r["sensor"]
+    title = (f"{r['lens']}: {r['images']}, central {r['patch']}² crops on {r['tiles']} tiles "
+             f"({s['grid'][0]}×{s['grid'][1]} of a {s['resolution'][0]}×{s['resolution'][1]} sensor, "
+             f"{s['pixel_pitch_um']:g} µm)")
+    t = Table(title=title)
+    for col in ("ring (relative radius)", "tiles", "scenes", "PSNR dB", "SSIM"):
+        t.add_column(col, justify="left" if col.startswith("ring") else "right")
+    for row in r["rings"]:
+        lo, hi = row["radius_rel"]
+        t.add_row(f"{row['ring']} ({lo:.2f}–{hi:.2f})", str(row["tiles"]), str(row["count"]),
+                  "—" if row["psnr_db"] is None else f"{row['psnr_db']:.2f}",
+                  "—" if row["ssim"] is None else f"{row['ssim']:.4f}")
+    t.add_row("[bold]all[/]", str(r["tiles"]), str(r["count"]), f"[bold]{r['psnr_db']:.2f}[/]",
+              f"[bold]{r['ssim']:.4f}[/]")
+    console.print(t)
+    what = "restored" if r["restored"] else "pre-restoration"
+    noise = f", noise σ = {r['noise_sigma']:g}" if r["noise_sigma"] > 0 else ", no noise"
+    console.print(f"{what} PSNR {r['psnr_db']:.2f} dB, SSIM {r['ssim']:.4f} ({r['space']}{noise}; seed {r['seed']})")
+    for note in r["notes"]:
+        console.print(f"note: {note}")
+    console.print("time: " + ", ".join(f"{k} {v:.1f} s" for k, v in r["timings"].items()))
