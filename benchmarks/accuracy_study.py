@@ -161,7 +161,8 @@ KEEP = {"rings": ("rings:4", "rings:16", "rings:64"), "rings_fixed": ("rings:16:
 
 def summarize() -> None:
     """Condensed markdown of the recorded results_accuracy_*.json (every point is in the JSON)."""
-    data = {k: json.loads((BENCH / f"results_accuracy_{k}.json").read_text()) for k in LENSES}
+    data = {k: json.loads((BENCH / f"results_accuracy_{k}.json").read_text()) for k in LENSES
+            if (BENCH / f"results_accuracy_{k}.json").exists()}
     print("| knob | setting | " + " | ".join(f"{k} error | {k} s" for k in data) + " |")
     print("| --- | --- | " + " | ".join("--- | ---" for _ in data) + " |")
     first = next(iter(data.values()))
