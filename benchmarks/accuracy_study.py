@@ -109,7 +109,9 @@ def part_commands(repeats: int, lenses: list[str], only: list[str] | None) -> No
     tmp.mkdir(parents=True, exist_ok=True)
     img = ROOT / "lensopt" / "imaging" / "data" / "coffee.png"
     rows = []
-    for lens in (ROOT / "lenses" / f"{name}.json" for name in lenses):
+    # A shipped lens by name, or any spec path (simulate needs a [sensor] and, beyond 3 wavelengths, rgb_weights:
+    # neither shipped lens has both, so simulate runs on specs/cooke_triplet.toml).
+    for lens in (ROOT / name if "/" in name else ROOT / "lenses" / f"{name}.json" for name in lenses):
         cmds = {"trace rings:32": ["trace", str(lens), "--sampling", "rings:32", "--json"],
                 "trace rings:64": ["trace", str(lens), "--sampling", "rings:64", "--json"],
                 "plot psf": ["plot", "psf", str(lens), "-o", str(tmp / "psf.png")],

@@ -341,7 +341,10 @@ def _sim_points(model: Model, knobs: Sequence[str], repeats: int,
 
     progress("reference simulation (12x9 grid, 36 fields, rings:48)")
     t0 = time.perf_counter()
-    ref = simulate(grid=(12, 9), fields=36, sampling="rings:48")
+    try:
+        ref = simulate(grid=(12, 9), fields=36, sampling="rings:48")
+    except LensoptError as err:  # e.g. no [sensor], or no rgb_weights for more than 3 wavelengths
+        return [], {"skipped": f"the lens cannot simulate the RGB test scene: {err}"}
     ref_info = {"grid": "12x9", "fields": 36, "sampling": "rings:48", "time_s": time.perf_counter() - t0,
                 "image": f"coffee.png {w}x{h} on the sensor corner"}
     variants = {"sim_grid": [(f"grid {g[0]}x{g[1]}", {"grid": g}) for g in ((1, 1), (2, 2), (3, 3), (5, 4), (8, 6))],
