@@ -69,7 +69,9 @@ def render(console: Any, d: dict[str, Any]) -> None:
         p = d["reference"]["psf"]
         console.print(f"PSF reference: FFT diffraction PSF, {p['size']}×{p['size']} bins of {p['pitch_um']:g} µm, "
                       f"{p['time_s']:.2f} s; with half the pupil samples it moves by NRMSE {p['self_check_nrmse']:.1e}")
-    if "sim" in d["reference"]:
+    if "sim" in d["reference"] and "skipped" in d["reference"]["sim"]:
+        console.print(f"simulation knobs skipped: {d['reference']['sim']['skipped']}", markup=False)
+    elif "sim" in d["reference"]:
         s = d["reference"]["sim"]
         console.print(f"simulation reference: {s['image']}, grid {s['grid']}, {s['fields']} fields, {s['sampling']}")
     if d.get("compile_s") is not None:

@@ -3,9 +3,12 @@
 Both give the same ``RayTrace`` (to ~1e-14 mm; tests hold them to 1e-12 mm). They differ in cost:
 
 - eager: no start-up, ≈ 0.5 µs per ray and surface loop in float64 on these 2-core machines;
-- compiled: 3–7× faster per ray, but the first call per lens *structure* in a process pays the
-  compilation: tens of seconds the very first time, ≈ 5 s in a later process that finds Inductor's
-  kernels in its on-disk cache (``TORCHINDUCTOR_CACHE_DIR``, default ``/tmp/torchinductor_$USER``).
+- compiled: 3–7× faster per ray, but the first call per lens *structure* (and per recorded/upto
+  variant) in a process pays the compilation: 20–90 s on a quiet 2-core machine, minutes when it is
+  loaded, ≈ 5 s in a later process that finds Inductor's kernels in its on-disk cache
+  (``TORCHINDUCTOR_CACHE_DIR``, default ``/tmp/torchinductor_$USER``) — but that cache is keyed by
+  the ray batch's shape: a new ray count in a new process compiles again (benchmarks/RESULTS.md,
+  issue 13).
 
 ``auto`` (the default) therefore works like renting skis: it traces eagerly until the rays traced
 for one lens structure in this process (``AUTO_MIN_RAYS``, ≈ 5 s of eager work) would have paid for

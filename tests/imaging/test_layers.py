@@ -1,4 +1,5 @@
-"""The package's layers (DESIGN.md, common rules): cli → spec (pydantic models + the builder) → tolerance →
+"""The package's layers (DESIGN.md, common rules): cli → qa (check, accuracy: whole lenses from their specs)
+→ spec (pydantic models + the builder) → tolerance →
 optim → restore → imaging / plot / io → analysis → optics → materials → errors. Imports only go down (not
 sideways between imaging, plot and io); typer, rich and pydantic appear only in the CLI and spec layers.
 Lazy imports inside functions count.
@@ -15,7 +16,7 @@ from pathlib import Path
 PKG = Path(__file__).resolve().parents[2] / "lensopt"
 
 RANK = {"errors": 0, "materials": 1, "optics": 2, "analysis": 3, "imaging": 4, "plot": 4, "io": 4, "restore": 5,
-        "optim": 6, "tolerance": 7, "spec": 8, "cli": 9}
+        "optim": 6, "tolerance": 7, "spec": 8, "qa": 8.5, "cli": 9}
 # Leaf utilities usable from any layer (they import nothing else from lensopt).
 MODULE_RANK = {"lensopt.io.files": 0}
 UI_PACKAGES = ("typer", "rich", "pydantic")
