@@ -70,7 +70,7 @@ def export_zemax(spec: LensSpec) -> str:
         extras["vignetting"] = spec.system.vignetting.model_dump()
     if spec.image.defocus != 0:
         extras["defocus"] = spec.image.defocus
-    lines = ["MODE SEQ", f"NAME {spec.name}"]
+    lines = ["VERS 190513 80 123457", "MODE SEQ", f"NAME {spec.name}"]
     body = ["UNIT MM X W X CM MR CPMM"]
     ap = spec.system.aperture
     body.append(f"ENPD {_num(ap.epd)}" if ap.epd is not None else f"FNUM {_num(ap.fnumber)} 0")

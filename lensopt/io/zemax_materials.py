@@ -31,7 +31,7 @@ def material(zf: Any, s: Any, catalogs: Any, gcat: list[str], extra: dict[str, A
     if upper == "MIRROR":
         raise SpecError(f"{where}: mirrors (GLAS MIRROR) are not supported: lensopt traces refractive systems only",
                         path=src)
-    if upper == "___BLANK":
+    if upper in ("___BLANK", "MODEL"):  # OpticStudio writes ___BLANK, optiland's writer MODEL
         values = [t for t in s.glass[1:]]
         try:
             nd, vd = float(values[2]), float(values[3])
