@@ -108,17 +108,17 @@ def export_zemax(spec: LensSpec) -> str:
     for i, surf in enumerate(spec.surfaces):
         thickness = surf.thickness + (spec.image.defocus if i == last else 0.0)
         moved = any(surf.decenter or (0.0,)) or any(surf.tilt_deg or (0.0,))
-        if moved and surf.decenter_mode != "basic":
-            raise SpecError("a decenter-and-return surface has no Zemax export yet (basic decenters are written "
-                            "as coordinate breaks)", path=f"surfaces[{i}].decenter_mode")
+        dx, dy = surf.decenter or (0.0, 0.0)
+        ax, ay = surf.tilt_deg or (0.0, 0.0)
         if moved:  # a coordinate break right before the surface: Zemax's basic decenter/tilt
             number += 1
-            dx, dy = surf.decenter or (0.0, 0.0)
-            ax, ay = surf.tilt_deg or (0.0, 0.0)
-            body += [f"SURF {number}", "  TYPE COORDBRK", "  CURV 0", f"  PARM 1 {_num(dx)}", f"  PARM 2 {_num(dy)}",
-                     f"  PARM 3 {_num(ax)}", f"  PARM 4 {_num(ay)}", "  PARM 5 0", "  PARM 6 0", "  DISZ 0"]
+            body += _coordbrk(number, dx, dy, ax, ay, 0, 0.0)
         number += 1
-        body += _surface(surf, number - 1, thickness, glass_lines[i], path=f"surfaces[{i}]")
+        returns = moved and surf.decenter_mode != "basic"
+        body += _surface(surf, number - 1, 0.0 if returns else thickness, glass_lines[i], path=f"surfaces[{i}]")
+        if returns:  # decenter-and-return: the inverse break (order flag 1, negated values) carries the gap
+            number += 1
+            body += _coordbrk(number, -dx, -dy, -ax, -ay, 1, thickness)
         extra: dict[str, Any] = {}
         if surf.vary:
             extra["vary"] = list(surf.vary)
@@ -167,6 +167,13 @@ def _glasses(spec: LensSpec, model: Any) -> tuple[list[str], list[str]]:
             gcat.append(cat)
         out.append(f"{mat.name} 0 0 {_num(mat.nd)} {_num(mat.vd)} 0 0 0 0 0 0")
     return out, gcat
+
+
+def _coordbrk(number: int, dx: float, dy: float, ax: float, ay: float, order: int, thickness: float) -> list[str]:
+    """A COORDBRK block: decenter (dx, dy) mm, tilts about x and y (degrees), order flag, thickness."""
+    return [f"SURF {number}", "  TYPE COORDBRK", "  CURV 0", f"  PARM 1 {_num(dx)}", f"  PARM 2 {_num(dy)}",
+            f"  PARM 3 {_num(ax)}", f"  PARM 4 {_num(ay)}", "  PARM 5 0", f"  PARM 6 {order}",
+            f"  DISZ {_num(thickness)}"]
 
 
 def _surface(surf: Any, i: int, thickness: float, glass: str, *, path: str) -> list[str]:
