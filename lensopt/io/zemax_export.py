@@ -102,11 +102,14 @@ def export_zemax(spec: LensSpec) -> str:
              "  DISZ " + ("INFINITY" if obj == "infinity" else _num(obj.distance))]
     surf_extras: dict[str, Any] = {}
     last = len(spec.surfaces) - 1
-    if spec.elements:
-        raise SpecError("element decenters/tilts ([[elements]]) have no export to Zemax yet", path="elements")
+    starts, ends = _elements(spec)
     number = 0
     for i, surf in enumerate(spec.surfaces):
         thickness = surf.thickness + (spec.image.defocus if i == last else 0.0)
+        if i in starts:  # a moved element: the break before its first surface
+            el = starts[i]
+            number += 1
+            body += _coordbrk(number, *el.decenter, *el.tilt_deg, 0, 0.0)
         moved = any(surf.decenter or (0.0,)) or any(surf.tilt_deg or (0.0,))
         dx, dy = surf.decenter or (0.0, 0.0)
         ax, ay = surf.tilt_deg or (0.0, 0.0)
@@ -115,10 +118,23 @@ def export_zemax(spec: LensSpec) -> str:
             body += _coordbrk(number, dx, dy, ax, ay, 0, 0.0)
         number += 1
         returns = moved and surf.decenter_mode != "basic"
-        body += _surface(surf, number - 1, 0.0 if returns else thickness, glass_lines[i], path=f"surfaces[{i}]")
+        closes = i in ends
+        body += _surface(surf, number - 1, 0.0 if returns or closes else thickness, glass_lines[i],
+                         path=f"surfaces[{i}]")
         if returns:  # decenter-and-return: the inverse break (order flag 1, negated values) carries the gap
             number += 1
             body += _coordbrk(number, -dx, -dy, -ax, -ay, 1, thickness)
+        if closes:  # back along the moved axis to the element's first vertex, then the inverse break
+            el = ends[i]
+            inner = 0.0
+            for k in range(el.surfaces[0], el.surfaces[1]):
+                inner += spec.surfaces[k].thickness
+            number += 2
+            body += [f"SURF {number - 1}", "  TYPE STANDARD", "  CURV 0", f"  DISZ {_num(-inner)}"]
+            if glass_lines[i]:
+                body.append(f"  GLAS {glass_lines[i]}")
+            body += _coordbrk(number, -el.decenter[0], -el.decenter[1], -el.tilt_deg[0], -el.tilt_deg[1], 1,
+                              inner + thickness)
         extra: dict[str, Any] = {}
         if surf.vary:
             extra["vary"] = list(surf.vary)
@@ -167,6 +183,30 @@ def _glasses(spec: LensSpec, model: Any) -> tuple[list[str], list[str]]:
             gcat.append(cat)
         out.append(f"{mat.name} 0 0 {_num(mat.nd)} {_num(mat.vd)} 0 0 0 0 0 0")
     return out, gcat
+
+
+def _elements(spec: LensSpec) -> tuple[dict[int, Any], dict[int, Any]]:
+    """Moved elements by first and by last surface; overlapping elements, and surface decenters inside an
+    element, have no single Zemax form here and are refused."""
+    starts: dict[int, Any] = {}
+    ends: dict[int, Any] = {}
+    taken: set[int] = set()
+    for n, el in enumerate(spec.elements or []):
+        if not (any(el.decenter) or any(el.tilt_deg)):
+            continue
+        first, last = el.surfaces
+        inside = set(range(first, last + 1))
+        if inside & taken:
+            raise SpecError("overlapping moved elements cannot be written as Zemax coordinate breaks",
+                            path=f"elements[{n}].surfaces")
+        for k in inside:
+            s = spec.surfaces[k]
+            if any(s.decenter or (0.0,)) or any(s.tilt_deg or (0.0,)):
+                raise SpecError("a decentered surface inside a moved element cannot be written as Zemax "
+                                "coordinate breaks", path=f"surfaces[{k}].decenter")
+        taken |= inside
+        starts[first], ends[last] = el, el
+    return starts, ends
 
 
 def _coordbrk(number: int, dx: float, dy: float, ax: float, ay: float, order: int, thickness: float) -> list[str]:

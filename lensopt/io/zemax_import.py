@@ -103,6 +103,7 @@ class ZFile:
     scale: float = 1.0
     extras: dict[str, Any] = field(default_factory=dict)
     notices: list[str] = field(default_factory=list)
+    elements: list[dict[str, Any]] = field(default_factory=list)
 
     def last(self, key: str) -> tuple[int, list[str]] | None:
         items = self.system.get(key)
@@ -388,6 +389,34 @@ def _return_pair(out: list[dict[str, Any]], s: ZSurface, scale: float) -> bool:
     return True
 
 
+def _element_return(out: list[dict[str, Any]], s: ZSurface, scale: float) -> dict[str, Any] | None:
+    """Zemax's tilted/decentered element: a break (order 0, no thickness) before surfaces first..last (the
+    last without thickness), a plane dummy going back −L along the moved axis (L = the element's inner
+    thicknesses), and this break with order flag 1 and the negated values, carrying L + the gap after the
+    element. Returns lensopt's element placement (surfaces removed from ``out`` accordingly), or None."""
+    if s.parm.get(6, 0.0) == 0 or s.parm.get(5, 0.0) != 0 or len(out) < 3:
+        return None
+    back = tuple(-s.parm.get(k, 0.0) for k in range(1, 5))
+    j = next((k for k in range(len(out) - 3, -1, -1) if _CB_KEY in out[k]), None)
+    if j is None:
+        return None
+    first, group, dummy = out[j][_CB_KEY], out[j + 1:-1], out[-1]
+    if first[4] != 0 or first[5] != 0 or tuple(first[:4]) != back or not group:
+        return None
+    if dummy.get("type") != "plane" or dummy.get("label") or any(_CB_KEY in g for g in group):
+        return None
+    inner = 0.0
+    for g in group[:-1]:
+        inner += g["thickness"]
+    if group[-1]["thickness"] != 0 or dummy["thickness"] != -inner:
+        return None
+    group[-1]["thickness"] = s.thickness * scale + dummy["thickness"]
+    del out[-1]
+    del out[j]
+    dx, dy, ax, ay = first[:4]
+    return {"surfaces": [j, j + len(group) - 1], "decenter": [dx * scale, dy * scale], "tilt_deg": [ax, ay]}
+
+
 def _lens_surfaces(zf: ZFile, catalogs: Any, extras: dict[str, Any], warnings: list[str]) -> list[dict[str, Any]]:
     scale = zf.scale
     src = zf.source
@@ -405,6 +434,13 @@ def _lens_surfaces(zf: ZFile, catalogs: Any, extras: dict[str, Any], warnings: l
             if _return_pair(out, s, scale):
                 warnings.append(f"surface {s.number}: coordinate-break pair imported as a decenter-and-return of "
                                 "the surface between them")
+                continue
+            element = _element_return(out, s, scale)
+            if element is not None:
+                zf.elements.append(element)
+                plain -= 1  # the element's return dummy is no lensopt surface
+                warnings.append(f"surface {s.number}: coordinate-break pair imported as a rigid decenter/tilt "
+                                f"of the element of surfaces {element['surfaces'][0]}..{element['surfaces'][1]}")
                 continue
             medium = out[-1]["material"] if out else "air"
             dummy = coordinate_break(zf, s, medium, scale)
