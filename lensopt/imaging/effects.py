@@ -15,7 +15,7 @@ __all__ = ["add_noise", "warp_distortion", "apply_relative_illumination"]
 def add_noise(image: Tensor, sigma: float, *, seed: int) -> Tensor:
     """Additive white Gaussian noise with σ = ``sigma`` × the image maximum (S3.3.1), seeded."""
     gen = torch.Generator().manual_seed(seed)
-    scale = sigma * float(image.max().clamp_min(0.0))
+    scale = sigma * float(image.detach().max().clamp_min(0.0))
     return image + scale * torch.randn(image.shape, generator=gen, dtype=image.dtype)
 
 

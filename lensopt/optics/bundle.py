@@ -21,10 +21,11 @@ import torch
 from torch import Tensor
 
 from lensopt.optics.aiming import ChiefAim, PupilAim, aim_chief, aim_full
+from lensopt.optics.backend import trace_with
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import FirstOrder, field_tangents, first_order
 from lensopt.optics.sampling import launch
-from lensopt.optics.trace import Rays, RayTrace, Status, trace
+from lensopt.optics.trace import Rays, RayTrace, Status
 from lensopt.optics.vignetting import (
     apply_vignetting,
     clip_ellipse_to_disc,
@@ -34,6 +35,7 @@ from lensopt.optics.vignetting import (
     front_aperture_disc,
     outside_front_aperture,
 )
+from lensopt.resources import BYTES_PER_RAY_SURFACE, require
 
 __all__ = ["Bundle", "PupilShape", "pupil_shape", "trace_bundle", "AIM_MODES"]
 
@@ -141,6 +143,7 @@ def trace_bundle(
     aim_steps: int | None = None,
     shape: PupilShape | None = None,
     rel_field_x: Tensor | None = None,
+    backend: str | None = None,
 ) -> Bundle:
     """Trace pupil points ``pupil`` ((P, 2) or (F, W, P, 2)) for every field and wavelength.
 
@@ -157,6 +160,7 @@ def trace_bundle(
             again when several bundles share fields); ``aim``/``vignetting`` are then not used.
         rel_field_x: (F,) relative fields in x (two-dimensional fields, for lenses that are not
             rotationally symmetric), scaled like ``rel_field``; needs ``aim = none``.
+        backend: ``auto``, ``eager`` or ``compiled`` (``optics.backend``); default: ``use_backend``'s.
 
     A lens with a placement (decentered or tilted surfaces) has no mirror symmetry: a half-pupil
     sampling is mirrored to the full pupil here and ``half_pupil`` becomes False, so centroids are
@@ -178,6 +182,9 @@ def trace_bundle(
         half_pupil = False
     if pupil.dim() == 2:
         pupil = pupil.expand(rel_field.shape[0], lens.wavelength_um.shape[0], *pupil.shape)
+    rays_n = pupil.numel() // 2
+    require(rays_n * (len(lens.shapes) + 2) * BYTES_PER_RAY_SURFACE, f"tracing {rays_n:,} rays",
+            lower="the pupil sampling (rings:N / grid:N) or the number of fields and wavelengths")
     if vignetting is None and system.vignetting and len(system.vignetting) == rel_field.shape[0]:
         vignetting = torch.tensor(system.vignetting, dtype=lens.dtype, device=lens.device).unsqueeze(1)
     if shape is None:
@@ -186,7 +193,7 @@ def trace_bundle(
     if shape.factors is not None:
         pupil = apply_vignetting(pupil, shape.factors)
     rays = launch(lens, system, pupil, tan, epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z, tan_field_x=tan_x)
-    result = trace(lens, rays, record=record)
+    result = trace_with(lens, rays, record=record, backend=backend)
     fa = system.front_aperture
     if fa is not None:
         # Rays outside the opening (a field blocked entirely, or the corners of an ``extent`` ellipse)

@@ -17,6 +17,7 @@ from torch import Tensor
 from lensopt.errors import SpecError
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.trace import Rays
+from lensopt.resources import require
 
 __all__ = ["PupilSampling", "pupil_rings", "pupil_grid", "fan", "launch"]
 
@@ -45,6 +46,7 @@ class PupilSampling:
 
     def points(self, *, dtype: torch.dtype, device: torch.device | None = None) -> Tensor:
         """(P, 2) relative pupil coordinates."""
+        require(64 * self.n**2, f"{self} pupil sampling ({self.n**2:,} points)", lower="N of rings:N / grid:N")
         if self.kind == "rings":
             return pupil_rings(self.n, jitter=self.jitter, seed=self.seed, dtype=dtype, device=device)
         return pupil_grid(self.n, dtype=dtype, device=device)

@@ -98,6 +98,9 @@ class AdamOptimizer:
     def stop_reason(self) -> str | None:
         return None
 
+    def invalidate(self) -> None:
+        """Nothing cached: every step evaluates ℓ afresh."""
+
     def reset(self) -> None:
         self._make()
         self.history.clear()

@@ -18,30 +18,22 @@ from torch import Tensor
 from lensopt.analysis.spot import spot_stats
 from lensopt.errors import LensoptError
 from lensopt.materials import design_catalog
-from lensopt.materials.glass_space import (
-    GlassMesh,
-    GlassSpace,
-    catalog_distance,
-    glass_mesh,
-    glass_space,
-    mesh_distance,
-)
+from lensopt.materials.glass_space import GlassMesh, GlassSpace, glass_mesh, glass_space
 from lensopt.optics.bundle import Bundle, trace_bundle
 from lensopt.optics.lens import Lens
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling
-from lensopt.optim import residuals as terms
+from lensopt.optim import residuals
+from lensopt.optim.image_objective import ImageObjective
 from lensopt.optim.rays import head, with_rim
 from lensopt.optim.schedule import schedule_weight
 from lensopt.optim.solves import apply_solves, resolve_solves, solved_quantities
+from lensopt.optim.terms import TERMS, TermContext
 from lensopt.optim.variables import Parameterization
 from lensopt.spec.models import LensSpec
-from lensopt.spec.optim import OptimizeSpec
+from lensopt.spec.optim import ImageSpec, OptimizeSpec
 
 __all__ = ["Evaluation", "Problem"]
-
-GROUPS = ("tra", "ray_path", "ray_angle", "surface_normal", "distortion", "relative_illumination",
-          "glass_mesh", "glass_catalog", "ray_failure")
 
 
 @dataclass(frozen=True)
@@ -71,8 +63,11 @@ class Problem:
         dtype: float64 for design work.
     """
 
-    def __init__(self, spec: LensSpec, *, seed: int = 0, dtype: torch.dtype = torch.float64) -> None:
+    def __init__(self, spec: LensSpec, *, seed: int = 0, dtype: torch.dtype = torch.float64,
+                 method: str | None = None, image_dtype: torch.dtype = torch.float32) -> None:
         self.opt: OptimizeSpec = spec.optimize or OptimizeSpec()
+        self.objective: str = self.opt.objective or "spot"
+        self.image: ImageObjective | None = None
         self.seed = seed
         self.dtype = dtype
         self.solves = resolve_solves(spec)
@@ -115,6 +110,10 @@ class Problem:
         ]
         self.failure_penalty = cons.ray_failure.penalty_mm or alpha
         self.theta0 = self.param.initial()
+        if self.objective == "raw":
+            mode = "scalar" if (method or self.opt.optimizer) == "adam" else "gtra"
+            self.image = ImageObjective(self.spec, self.system, self.opt.image or ImageSpec(), mode=mode,
+                                        dtype=image_dtype)
         self.slices = self._layout()
         self.size = max((sl.stop for sl in self.slices.values()), default=0)
 
@@ -129,18 +128,8 @@ class Problem:
         return len(self.param.of_kind("glass"))
 
     def _weight(self, group: str) -> float | None:
-        """Static weight of a group, None when the group is off."""
-        cons = self.opt.constraints
-        if group == "tra":
-            return self.opt.tra.weight
-        if group in ("glass_mesh", "glass_catalog"):
-            if self.num_glasses == 0 or getattr(cons, group) is None:
-                return None
-            return cons.glass_mesh.weight if group == "glass_mesh" else 1.0
-        if group == "ray_failure":
-            return cons.ray_failure.weight or None
-        spec = getattr(cons, group)
-        return None if spec is None else spec.weight
+        """Static weight of a registered term, None when it is off."""
+        return TERMS[group].weight(self)
 
     def _layout(self) -> dict[str, slice]:
         with torch.no_grad():
@@ -164,13 +153,13 @@ class Problem:
         """(S,), (S,) lower and upper t_z bounds per gap (mm), relative to centre thickness in glass."""
         rp = self.opt.constraints.ray_path
         S = lens.num_surfaces
-        big = torch.full((), terms.BIG, dtype=lens.dtype)
+        big = torch.full((), residuals.BIG, dtype=lens.dtype)
         lo, hi = [], []
         for s in range(S):
             ct = lens.thickness[s]
             if s == S - 1:
-                low = torch.zeros_like(ct) + (rp.image_min if rp.image_min is not None else -terms.BIG)
-                high = torch.zeros_like(ct) + (rp.image_max if rp.image_max is not None else terms.BIG)
+                low = torch.zeros_like(ct) + (rp.image_min if rp.image_min is not None else -residuals.BIG)
+                high = torch.zeros_like(ct) + (rp.image_max if rp.image_max is not None else residuals.BIG)
             elif self.glass_gap[s]:
                 low = torch.zeros_like(ct) + rp.glass_min
                 high = big + 0 * ct if rp.glass_max is None else torch.zeros_like(ct) + rp.glass_max
@@ -196,37 +185,18 @@ class Problem:
         return self._terms(theta, lens, self.bundle(lens))
 
     def _terms(self, theta: Tensor, lens: Lens, bundle: Bundle) -> dict[str, Tensor]:
-        """Spot terms (TRA, distortion, illumination) from the spot sample; geometric constraints and
-        failures from every ray, the rim rays included."""
-        cons = self.opt.constraints
-        ww = self.system.wavelength_weights
+        """The registered terms (``lensopt.optim.terms``), each times its static weight: spot terms
+        (TRA, distortion, illumination) from the spot sample; geometric constraints and failures from
+        every ray, the rim rays included."""
         spot = head(bundle, self.num_spot)
-        stats = spot_stats(spot, ww, self.field_weights)
+        stats = spot_stats(spot, self.system.wavelength_weights, self.field_weights)
+        ctx = TermContext(self, theta, lens, bundle, spot, stats)
         out: dict[str, Tensor] = {}
-        for group in GROUPS:
-            w = self._weight(group)
+        for name, term in TERMS.items():
+            w = term.weight(self)
             if w is None:
                 continue
-            if group == "tra":
-                r = terms.tra(spot, stats, ww, self.field_weights)
-            elif group == "ray_path":
-                r = terms.ray_path(bundle, *self.gap_bounds(lens))
-            elif group == "ray_angle":
-                r = terms.ray_angle(bundle, self.interfaces, cons.ray_angle.max_deg)
-            elif group == "surface_normal":
-                refracting = [s for s in self.interfaces if not self.spec.surfaces[s].type == "plane"]
-                r = terms.surface_normal(bundle, refracting, cons.surface_normal.max_deg)
-            elif group == "distortion":
-                r = terms.distortion(lens, self.system, spot, stats, cons.distortion.max_percent / 100)
-            elif group == "relative_illumination":
-                r = terms.relative_illumination(spot, ww, cons.relative_illumination.min)
-            elif group == "glass_mesh":
-                r = mesh_distance(self.param.glass_g(theta), self.mesh)
-            elif group == "glass_catalog":
-                r = catalog_distance(self.param.glass_g(theta), self.space)
-            else:
-                r = terms.failures(bundle, lens, self.failure_penalty)
-            out[group] = r * w
+            out[name] = term.residual(ctx) * w
         return out
 
     def residuals(self, theta: Tensor) -> Tensor:
@@ -246,7 +216,7 @@ class Problem:
         """Weight schedules of the active groups (the glass-catalog one, and any group's own)."""
         out = {}
         for name in self.slices:
-            spec = self.opt.tra if name == "tra" else getattr(self.opt.constraints, name, None)
+            spec = TERMS[name].config(self)
             knots = getattr(spec, "schedule", None)
             if knots:
                 out[name] = list(knots)
@@ -320,6 +290,13 @@ class Problem:
         if scale is not None:
             r = r * scale
         return {name: 0.5 * float((r[sl] ** 2).sum()) for name, sl in self.slices.items()}
+
+    def spot_esr_mm(self, theta: Tensor) -> float:
+        """Effective spot radius of the optimization rays' spot sample at θ (a trace; any objective)."""
+        with torch.no_grad():
+            lens, _ = self.lens(theta)
+            spot = head(self.bundle(lens), self.num_spot)
+            return float(spot_stats(spot, self.system.wavelength_weights, self.field_weights).effective_radius)
 
     def esr_mm(self, r: Tensor) -> float:
         """Effective spot radius of the optimization rays from the TRA rows (‖ℓ_TRA‖/w_TRA)."""

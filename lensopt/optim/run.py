@@ -12,6 +12,7 @@ import torch
 
 from lensopt.errors import LensoptError
 from lensopt.optim.adam import AdamOptimizer
+from lensopt.optim.image_objective import psnr_db
 from lensopt.optim.lm import LevenbergMarquardt, Trial
 from lensopt.optim.problem import Problem
 from lensopt.optim.writeback import BoundGlass, bind_glasses, to_spec
@@ -40,6 +41,8 @@ class Progress:
         valid_fraction: share of optimization rays that reach the image.
         event: a note (binding, rejection reason), or "".
         elapsed_s: wall time since the start.
+        image_loss: image loss L of this step's batch (image objectives; NaN otherwise).
+        psnr_db: PSNR of this step's batch from L, dB (NaN for spot objectives).
     """
 
     step: int
@@ -55,6 +58,8 @@ class Progress:
     valid_fraction: float
     event: str
     elapsed_s: float
+    image_loss: float = float("nan")
+    psnr_db: float = float("nan")
 
 
 @dataclass
@@ -69,6 +74,8 @@ class OptimizeResult:
         history: (step, elapsed s, merit, ESR µm) per step.
         start_esr_um, start_merit: at the start point.
         warning: set when optimization rays still fail at the end (how many, why).
+        start_psnr_db, final_psnr_db: held-out PSNR of the image objective before and after (NaN for spot).
+        image_history: (step, image loss) per step of an image objective.
     """
 
     spec: LensSpec
@@ -83,6 +90,9 @@ class OptimizeResult:
     start_merit: float = float("nan")
     elapsed_s: float = 0.0
     warning: str = ""
+    start_psnr_db: float = float("nan")
+    final_psnr_db: float = float("nan")
+    image_history: list[tuple[int, float]] = field(default_factory=list)
 
 
 def make_optimizer(problem: Problem, theta: torch.Tensor, method: str) -> LevenbergMarquardt | AdamOptimizer:
@@ -108,9 +118,10 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
         OptimizeError: nothing varies, or the start lens is not usable (the message says why).
     """
     t0 = time.perf_counter()
-    problem = Problem(spec, seed=seed)
+    opt0 = spec.optimize
+    method = optimizer or (opt0.optimizer if opt0 is not None else "lm")
+    problem = Problem(spec, seed=seed, method=method)
     opt = problem.opt
-    method = optimizer or opt.optimizer
     total = steps if steps is not None else opt.steps
     if problem.num_variables == 0:
         raise OptimizeError("nothing to optimize: no surface has a vary list", path="surfaces")
@@ -122,6 +133,9 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
                             interrupted=False, bound=[],
                             start_esr_um=1e3 * problem.esr_mm(start.residuals),
                             start_merit=0.5 * float(((scale0 * start.residuals) ** 2).sum()))
+    if problem.image is not None:
+        result.start_esr_um = 1e3 * problem.spot_esr_mm(problem.theta0)
+        result.start_psnr_db = problem.image.held_out_psnr(problem.lens(problem.theta0)[0])
     bind_step = round(opt.bind_at * total) if problem.num_glasses and opt.bind_at < 1 else None
     state = make_optimizer(problem, problem.theta0, method)
     phase = "glasses free" if problem.num_glasses else "fixed glasses"
@@ -135,11 +149,16 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
                 phase = "glasses bound"
             frac = k / total
             scale = problem.row_scale(frac)
+            image_loss = _next_batch(problem, state, k, method)
             info = state.step(scale)
             k += 1
             result.steps = k
             r = state.residuals
-            esr = 1e3 * problem.esr_mm(r) if r is not None else float("nan")
+            if problem.image is not None:
+                esr = 1e3 * problem.spot_esr_mm(state.theta)
+                result.image_history.append((k, image_loss))
+            else:
+                esr = 1e3 * problem.esr_mm(r) if r is not None else float("nan")
             elapsed = time.perf_counter() - t0
             result.history.append((k, elapsed, info.merit, esr))
             if callback is not None:
@@ -147,7 +166,8 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
                 tot = sum(merits.values()) or 1.0
                 callback(Progress(k, total, phase, info.merit, state.damping, esr, state.accepted, state.rejected,
                                   info.accepted, {n: m / tot for n, m in merits.items()},
-                                  _valid_fraction(problem, r), event or info.reason, elapsed))
+                                  _valid_fraction(problem, r), event or info.reason, elapsed, image_loss,
+                                  psnr_db(image_loss) if image_loss == image_loss else float("nan")))
             event = ""
             flat = problem.schedules_settled(frac)
             reason = state.stop_reason()
@@ -166,6 +186,8 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
         result.stop_reason = "interrupted"
     result.problem = problem
     result.theta = state.theta
+    if problem.image is not None:
+        result.final_psnr_db = problem.image.held_out_psnr(problem.lens(result.theta)[0])
     result.spec = to_spec(problem, result.theta)
     failed, rays, reasons = problem.failure_summary(result.theta)
     if failed:
@@ -174,6 +196,25 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
                           "far from a working lens: change it, or run more steps")
     result.elapsed_s = time.perf_counter() - t0
     return result
+
+
+def _next_batch(problem: Problem, state, k: int, method: str) -> float:  # noqa: ANN001
+    """Image objectives: the batch of step ``k``; for LM the GTRA target at the current lens (the
+    residual function changes, so the optimizer's cached ℓ and J are dropped). Returns the image loss
+    of the batch at the current lens (NaN for spot objectives)."""
+    img = problem.image
+    if img is None:
+        return float("nan")
+    img.set_batch(k)
+    with torch.no_grad():
+        lens, _ = problem.lens(state.theta)
+    if method == "lm":
+        loss = float(img.update(lens).loss)
+    else:
+        with torch.no_grad():
+            loss = float(img.loss(lens))
+    state.invalidate()
+    return loss
 
 
 def _valid_fraction(problem: Problem, r: torch.Tensor | None) -> float:
@@ -189,7 +230,7 @@ def _bind(problem: Problem, state, result: OptimizeResult, method: str, seed: in
     spec, bound = bind_glasses(problem, state.theta)
     if spec.optimize is not None and spec.optimize.sampling_after_binding:
         spec.optimize = spec.optimize.model_copy(update={"sampling": spec.optimize.sampling_after_binding})
-    new = Problem(spec, seed=seed)
+    new = Problem(spec, seed=seed, method=method)
     ev = new.evaluate(new.theta0)
     if not ev.physical:
         raise OptimizeError(f"binding the glasses to the catalog made the lens unusable: {ev.reason}")

@@ -21,7 +21,7 @@ from lensopt.spec.models import (
     curvature_of,
 )
 
-__all__ = ["Model", "build", "camera_of", "resolve_material", "placement_of"]
+__all__ = ["Model", "build", "camera_of", "placement_of", "resolve_material"]
 
 
 @dataclass(frozen=True)

@@ -45,7 +45,14 @@ def load_spec(path: str | Path) -> LensSpec:
         raise SpecError(f"malformed TOML: {err}", path=str(path)) from None
     except json.JSONDecodeError as err:
         raise SpecError(f"malformed JSON: {err}", path=str(path)) from None
-    return parse_spec(data)
+    except RecursionError:
+        raise SpecError("nested too deeply to be a lens", path=str(path)) from None
+    except ValueError as err:  # an integer of more than 4300 digits
+        raise SpecError(f"unreadable number: {err}", path=str(path)) from None
+    try:
+        return parse_spec(data)
+    except RecursionError:
+        raise SpecError("nested too deeply to be a lens", path=str(path)) from None
 
 
 def parse_spec(data: dict[str, Any]) -> LensSpec:
@@ -72,11 +79,15 @@ def save_json(spec: LensSpec, path: str | Path) -> None:
 def format_loc(loc: tuple[Any, ...]) -> str:
     """``('surfaces', 3, 'sphere', 'radius')`` → ``surfaces[3].radius`` (union tags dropped)."""
     out = ""
+    after_tag = False
     for part in loc:
+        # A tag names the union member; "conic" is also a field of the conic member (conic.conic).
+        if not isinstance(part, int) and _is_tag(part) and not (after_tag and part == "conic"):
+            after_tag = True
+            continue
+        after_tag = False
         if isinstance(part, int):
             out += f"[{part}]"
-        elif _is_tag(part):
-            continue
         else:
             out += f".{part}" if out else str(part)
     return out

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+import typing
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -46,10 +47,35 @@ __all__ = [
 ]
 
 
+#: Largest gap or clear semi-diameter accepted, mm (1 km): beyond it a lens is a typo, and float64 ray
+#: arithmetic on 1e308 mm overflows to NaN.
+MAX_LENGTH_MM = 1e6
+_SCALARS = {float: "a valid number", int: "a valid integer", bool: "true or false"}
+
+
+def _scalar_kind(annotation: Any) -> str | None:
+    """``a number`` for float / float | None fields (likewise int, bool); None for anything else."""
+    if annotation in _SCALARS:
+        return _SCALARS[annotation]
+    args = [a for a in typing.get_args(annotation) if a is not type(None)]
+    return _SCALARS.get(args[0]) if len(args) == 1 and args[0] in _SCALARS else None
+
+
 class _Model(BaseModel):
     # Numbers must be finite (TOML accepts inf and nan); only a radius may be inf (a flat surface).
     model_config = ConfigDict(extra="forbid", validate_assignment=True, ser_json_inf_nan="constants",
                               allow_inf_nan=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_text_numbers(cls, data: Any) -> Any:
+        """``radius = "1e999"`` or ``stop = "yes"`` are typos, not numbers or flags (pydantic would coerce)."""
+        if isinstance(data, dict):
+            for name, info in cls.model_fields.items():
+                value = data.get(name)
+                if isinstance(value, str) and (kind := _scalar_kind(info.annotation)) is not None:
+                    raise ValueError(f"@{name}: must be {kind}, not text (got {value!r})")
+        return data
 
 
 # --------------------------------------------------------------------------------------- system
@@ -218,7 +244,7 @@ class SpectrumSpec(_Model):
 
 
 class SensorSpec(_Model):
-    pixel_pitch_um: float = Field(gt=0)
+    pixel_pitch_um: float = Field(gt=0, le=1e4)
     resolution: tuple[int, int] | None = None
 
     @field_validator("resolution")
@@ -346,9 +372,9 @@ _VARY_RE = re.compile(r"^(radius|thickness|conic|material|coefficients|phase)(\.
 class _Interface(_Model):
     """What every surface has: the gap after it, its medium, clear aperture, stop flag, variables."""
 
-    thickness: float
+    thickness: float = Field(ge=-MAX_LENGTH_MM, le=MAX_LENGTH_MM)
     material: MaterialSpec = "air"
-    semi_diameter: float | None = Field(default=None, gt=0)
+    semi_diameter: float | None = Field(default=None, gt=0, le=MAX_LENGTH_MM)
     stop: bool = False
     clip: bool = False
     vary: list[str] = Field(default_factory=list)
@@ -452,6 +478,32 @@ class ImageSpec(_Model):
     defocus: float = 0.0
 
 
+CHECK_METRICS = {
+    "efl_mm": 1e-5, "bfl_mm": 1e-5, "fnumber": 1e-6, "ttl_mm": 1e-5, "esr_um": 1e-3, "rms_um": 1e-3,
+    "distortion_percent": 1e-4, "ri": 1e-5, "failed_rays": 0.0, "margin": 1e-3,
+}
+"""Metric families of ``lensopt check`` and their default absolute tolerances (in the metric's unit:
+mm, µm, %, a fraction, a ray count; margins in their constraint's unit). The metrics are computed with
+fixed, seeded settings, so only rounding differences across platforms must pass: a 0.01 mm change of
+one thickness or a swapped glass moves several of them far past these."""
+
+
+class CheckSpec(_Model):
+    """``[check]``: tolerances of ``lensopt check`` per metric family (absolute; see ``CHECK_METRICS``)."""
+
+    tolerances: dict[str, float] = Field(default_factory=dict)
+
+    @field_validator("tolerances")
+    @classmethod
+    def _known(cls, v: dict[str, float]) -> dict[str, float]:
+        for k, tol in v.items():
+            if k not in CHECK_METRICS:
+                raise ValueError(f"@{k}: unknown metric; one of {', '.join(CHECK_METRICS)}")
+            if not tol >= 0:
+                raise ValueError(f"@{k}: a tolerance must be ≥ 0, got {tol}")
+        return v
+
+
 class LensSpec(_Model):
     """A complete lens: system, spectrum, optional sensor, surfaces in order, image, and the optional
     ``[optimize]`` section read by ``lensopt optimize`` (see ``lensopt.spec.optim``)."""
@@ -465,6 +517,7 @@ class LensSpec(_Model):
     elements: list[ElementPlacementSpec] | None = None
     optimize: OptimizeSpec | None = None
     tolerance: ToleranceSpec | None = None
+    check: CheckSpec | None = None
 
     @model_validator(mode="after")
     def _structure(self) -> LensSpec:

@@ -27,6 +27,7 @@ __all__ = [
     "ConstraintsSpec",
     "LMSpec",
     "AdamSpec",
+    "ImageSpec",
     "OptimizeSpec",
 ]
 
@@ -59,8 +60,8 @@ class SolveSpec(_Model):
     def _fields(self) -> SolveSpec:
         if self.type in ("efl", "image_height", "ttl") and self.value is None:
             raise ValueError(f"@value: a {self.type} solve needs a target value")
-        if self.type in ("efl", "image_height", "ttl") and not (self.value is not None and self.value > 0):
-            raise ValueError(f"@value: must be positive (got {self.value})")
+        if self.type in ("efl", "image_height", "ttl") and not (self.value is not None and 0 < self.value <= 1e6):
+            raise ValueError(f"@value: must be positive and at most 1e6 mm (got {self.value})")
         if self.type in ("ttl", "focus") and self.surface is not None:
             raise ValueError(f"@surface: a {self.type} solve acts on the last airspace; leave surface out")
         if self.type == "focus" and self.value is not None:
@@ -220,6 +221,70 @@ class AdamSpec(_Model):
     beta2: float = Field(default=0.999, ge=0, lt=1)
 
 
+class ImageSpec(_Model):
+    """``[optimize.image]``: how image-driven objectives (``objective = "raw"``) render training batches
+    (S1.5, S3.3.1).
+
+    Attributes:
+        weight: weight of the image term (ℓ_GTRA for LM, the scalar loss for Adam).
+        patch: patch size in sensor pixels (square); the sensor is cut into tiles of this size.
+        batch: patches per step.
+        psf_size: PSF array side in sensor pixels (odd; the seed's C-mount study: 49).
+        grid: sub-tile PSF grid per patch (W_g, H_g).
+        overlap: overlap of neighbouring sub-tiles (S1.5.2).
+        fields: number of equidistant relative fields (0 … 1) whose PSFs render the patches.
+        sampling: pupil sampling of the rendering rays (its spot diagrams are ε of GTRA).
+        kernel: KDE kernel (S1.4.2).
+        diffraction: apply the diffraction heuristic (S1.4.3) to the PSFs.
+        noise: σ of the additive Gaussian noise, fraction of the maximum (S3.3.1).
+        images: folder of training images (PNG/JPEG/TIFF/EXR; DIV2K layout or a hash split); absent:
+            procedural dead-leaves scenes.
+        validation: held-out patches used for the PSNR reported at the end.
+        seed: seed of scenes, crops, regions and noise.
+    """
+
+    weight: float = Field(default=1.0, gt=0)
+    patch: int = Field(default=128, ge=8)
+    batch: int = Field(default=4, ge=1)
+    psf_size: int = 49
+    grid: tuple[int, int] = (3, 3)
+    overlap: float = Field(default=0.25, ge=0, le=1)
+    fields: int = Field(default=11, ge=2, le=64)
+    sampling: str = "rings:12"
+    kernel: Literal["triangular", "cosine"] = "triangular"
+    diffraction: bool = False
+    noise: float = Field(default=0.005, ge=0, lt=1)
+    images: str | None = None
+    validation: int = Field(default=16, ge=1)
+    seed: int = 0
+
+    @field_validator("psf_size")
+    @classmethod
+    def _odd(cls, v: int) -> int:
+        if v < 1 or v % 2 == 0:
+            raise ValueError(f"must be a positive odd number of pixels (got {v})")
+        return v
+
+    @field_validator("grid")
+    @classmethod
+    def _grid(cls, v: tuple[int, int]) -> tuple[int, int]:
+        if min(v) < 1:
+            raise ValueError(f"must be two positive integers (got {list(v)})")
+        return v
+
+    @field_validator("sampling")
+    @classmethod
+    def _sampling(cls, v: str) -> str:
+        return _check_sampling(v)
+
+
+def _check_sampling(v: str) -> str:
+    m = re.fullmatch(r"(rings|grid):(\d+)(:nojitter)?", v.strip())
+    if not m or int(m.group(2)) < 1 or (m.group(1) == "grid" and m.group(3)):
+        raise ValueError(f"expected rings:N, rings:N:nojitter or grid:N with N ≥ 1 (got {v!r})")
+    return v.strip()
+
+
 class OptimizeSpec(_Model):
     """How ``lensopt optimize`` runs on this spec.
 
@@ -240,6 +305,10 @@ class OptimizeSpec(_Model):
             entry, frozen, and the optimizer reset (S4.1.3); 1 = never.
         steps: number of optimizer steps (the CLI's --steps overrides).
         optimizer: ``lm`` or ``adam`` (the CLI's --optimizer overrides).
+        objective: ``spot`` (TRA, spot size; the default, also when None) or ``raw`` (MSE of the simulated
+            capture against the scene, through GTRA for LM, S3.1; needs ``[sensor]``; rendering set by
+            ``image``).
+        image: ``[optimize.image]``, the rendering of training batches for image objectives.
     """
 
     alpha: float | None = Field(default=None, gt=0)
@@ -252,6 +321,8 @@ class OptimizeSpec(_Model):
     bind_at: float = Field(default=0.5, ge=0, le=1)
     steps: int = Field(default=500, ge=1)
     optimizer: Literal["lm", "adam"] = "lm"
+    objective: Literal["spot", "raw"] | None = None
+    image: ImageSpec | None = None
     solves: list[Annotated[SolveSpec, Field()]] = Field(default_factory=list)
     tra: TraSpec = Field(default_factory=TraSpec)
     constraints: ConstraintsSpec = Field(default_factory=ConstraintsSpec)

@@ -139,6 +139,16 @@ def test_folder_batches(tmp_path: Path) -> None:
     assert abs(v - ((128 / 255 + 0.055) / 1.055) ** 2.4) < 1e-6
 
 
+def test_exr_and_tiff_are_read_linear(tmp_path: Path) -> None:
+    arr = _ramp(20, 24) * 0.8
+    write_image(tmp_path / "a.exr", arr, ImageInfo(24, 20, 3, 32, True, "linear", "exr"))
+    write_image(tmp_path / "b.tif", arr, ImageInfo(24, 20, 3, 32, True, "linear", "tiff"))
+    ds = ImageFolder(tmp_path, patch=8)
+    assert [p.suffix for p in ds.files] == [".exr", ".tif"]
+    for k in range(2):
+        assert torch.equal(ds.load(k), torch.from_numpy(arr).permute(2, 0, 1))  # float files: no transfer curve
+
+
 def test_div2k_layout(tmp_path: Path) -> None:
     for name, n in (("train_HR", 3), ("valid_HR", 2)):
         (tmp_path / name).mkdir()

@@ -42,6 +42,15 @@ def test_delta_psf_lens_scores_perfectly_and_every_tile_once() -> None:
     assert all(math.isinf(it.psnr_db) and it.ssim == pytest.approx(1.0) for it in ev.items)
 
 
+def test_noise_is_seeded_and_costs_psnr() -> None:
+    camera = camera_of(oval_model(pitch_um=30.0, resolution=(64, 48)))
+    scenes, names, _ = scene_source(None, count=4, patch=16, seed=1)
+    runs = [evaluate(camera, scenes, names, patch=16, seed=1, noise_sigma=0.01, options=PlanOptions(sampling="rings:4"))
+            for _ in range(2)]
+    assert [it.psnr_db for it in runs[0].items] == [it.psnr_db for it in runs[1].items]
+    assert all(25 < it.psnr_db < 60 for it in runs[0].items)  # finite: the delta lens alone scores ∞
+
+
 def test_restore_hook_sees_the_capture_and_its_output_is_scored() -> None:
     camera = camera_of(build(load_spec(CMOUNT)))
     src = DeadLeaves(seed=2)
