@@ -44,6 +44,10 @@ __all__ = ["export_zemax", "write_zemax"]
 _MAX_POWER = 16  # EVENASPH / BINARY_2 PARM 8 is r^16
 
 
+def _one_line(text: str) -> str:
+    return " ".join(text.split())
+
+
 def _num(x: float) -> str:
     return fmt_exact(x)
 
@@ -70,7 +74,7 @@ def export_zemax(spec: LensSpec) -> str:
         extras["vignetting"] = spec.system.vignetting.model_dump()
     if spec.image.defocus != 0:
         extras["defocus"] = spec.image.defocus
-    lines = ["VERS 190513 80 123457", "MODE SEQ", f"NAME {spec.name}"]
+    lines = ["VERS 190513 80 123457", "MODE SEQ", f"NAME {_one_line(spec.name)}"]
     body = ["UNIT MM X W X CM MR CPMM"]
     ap = spec.system.aperture
     body.append(f"ENPD {_num(ap.epd)}" if ap.epd is not None else f"FNUM {_num(ap.fnumber)} 0")
@@ -230,7 +234,7 @@ def _surface(surf: Any, i: int, thickness: float, glass: str, *, path: str) -> l
     if surf.stop:
         out.append("  STOP")
     if surf.label:
-        out.append(f"  COMM {surf.label}")
+        out.append(f"  COMM {_one_line(surf.label)}")
     if isinstance(surf, DiffractiveSurface):
         out.append("  TYPE BINARY_2")
     elif coefficients:
