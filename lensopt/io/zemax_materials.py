@@ -52,6 +52,9 @@ def material(zf: Any, s: Any, catalogs: Any, gcat: list[str], extra: dict[str, A
                     return ex
             except LensoptError:
                 pass
+        note = f"model glass nd {nd:g}, vd {vd:g}, ΔPgF {dpgf:g}: lensopt's Hartmann dispersion"
+        if not any(note in w for w in warnings):
+            warnings.append(f"{note} (Zemax's model glass disperses slightly differently away from the d line)")
         return model
     ex = extra.get("material")
     if isinstance(ex, dict) and set(ex) == {"catalog", "glass"} and normalize_name(str(ex["glass"])) == \
