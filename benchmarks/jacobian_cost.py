@@ -3,6 +3,12 @@
 problems of specs/cooke_triplet_opt.toml and specs/cmount_4p.toml (start points).
 
     .venv/bin/python benchmarks/jacobian_cost.py --repeats 5 --json benchmarks/results_jacobian_cost.json
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/jacobian_cost.py --compiled --no-fd --jacrev-max-rows 0 \
+        --json benchmarks/results_jacobian_compiled.json
+
+``--compiled`` adds the compiled forward-mode Jacobian (``optim.compiled_jacobian``: make_fx of jacfwd,
+compiled by Inductor) with its one-off capture + compile time; every row also gives its cost in units
+of one eager residual evaluation measured in the same run.
 
 Prints a markdown table: median wall time per Jacobian, ratio to jacfwd, and the largest difference
 from jacfwd relative to the largest Jacobian entry. Reverse mode is skipped for problems with more than
@@ -37,7 +43,7 @@ def _time(fn, repeats: int) -> tuple[float, torch.Tensor]:  # noqa: ANN001
     return statistics.median(times), out
 
 
-def bench(spec_name: str, repeats: int, jacrev_max_rows: int) -> dict:
+def bench(spec_name: str, repeats: int, jacrev_max_rows: int, compiled: bool = False, fd: bool = True) -> dict:
     p = Problem(load_spec(SPECS / spec_name))
     theta = p.theta0
     N, M = p.num_variables, p.size
@@ -67,15 +73,27 @@ def bench(spec_name: str, repeats: int, jacrev_max_rows: int) -> dict:
     rows["one residual evaluation"] = (t_res, None)
     t_fwd, J = _time(lambda: p.jacobian(theta)[0], repeats)
     rows["jacfwd (forward mode)"] = (t_fwd, J)
+    extra = {}
+    if compiled:
+        from lensopt.optim.compiled_jacobian import CompiledJacobian
+
+        cj = CompiledJacobian(p, check=False)
+        t0 = time.perf_counter()
+        cj(theta)
+        extra["compile_s"] = time.perf_counter() - t0
+        extra["compiled"] = cj.compiled
+        rows["jacfwd compiled (make_fx + Inductor)"] = _time(lambda: cj(theta)[0], repeats)
     if M <= jacrev_max_rows:
         rows["jacrev (reverse mode)"] = _time(lambda: torch.func.jacrev(p.residuals)(theta), max(1, repeats // 2))
-    rows[f"forward differences (N+1 = {N + 1} evaluations)"] = _time(forward_fd, repeats)
-    rows[f"central differences (2N = {2 * N} evaluations)"] = _time(central_fd, repeats)
+    if fd:
+        rows[f"forward differences (N+1 = {N + 1} evaluations)"] = _time(forward_fd, repeats)
+        rows[f"central differences (2N = {2 * N} evaluations)"] = _time(central_fd, repeats)
     scale = float(J.abs().max())
-    out = {"spec": spec_name, "variables": N, "residuals": M, "rows": []}
+    out = {"spec": spec_name, "variables": N, "residuals": M, "rows": [], **extra}
     for name, (t, Jx) in rows.items():
         diff = None if Jx is None or Jx is J else float((Jx - J).abs().max()) / scale
-        out["rows"].append({"method": name, "median_s": t, "ratio_to_jacfwd": t / t_fwd, "max_rel_diff": diff})
+        out["rows"].append({"method": name, "median_s": t, "ratio_to_jacfwd": t / t_fwd,
+                            "residual_evaluations": t / t_res, "max_rel_diff": diff})
     return out
 
 
@@ -84,21 +102,27 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--jacrev-max-rows", type=int, default=20000)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--compiled", action="store_true", help="add the compiled forward-mode Jacobian")
+    ap.add_argument("--no-fd", action="store_true", help="skip the finite-difference rows")
+    ap.add_argument("--specs", default="cooke_triplet_opt.toml,cmount_4p.toml")
     args = ap.parse_args()
     results = {
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "torch": torch.__version__,
                     "threads": torch.get_num_threads(), "loadavg_before": os.getloadavg()},
-        "problems": [bench(s, args.repeats, args.jacrev_max_rows)
-                     for s in ("cooke_triplet_opt.toml", "cmount_4p.toml")],
+        "problems": [bench(s, args.repeats, args.jacrev_max_rows, args.compiled, not args.no_fd)
+                     for s in args.specs.split(",")],
     }
     results["machine"]["loadavg_after"] = os.getloadavg()
     for prob in results["problems"]:
-        print(f"\n{prob['spec']}: N = {prob['variables']} variables, M = {prob['residuals']} residuals\n")
-        print("| method | median s | × jacfwd | max |ΔJ| / max |J| |")
-        print("| --- | ---: | ---: | ---: |")
+        print(f"\n{prob['spec']}: N = {prob['variables']} variables, M = {prob['residuals']} residuals")
+        if "compile_s" in prob:
+            print(f"compiled Jacobian: capture + compile {prob['compile_s']:.0f} s (compiled: {prob['compiled']})")
+        print("\n| method | median s | × jacfwd | residual evaluations | max |ΔJ| / max |J| |")
+        print("| --- | ---: | ---: | ---: | ---: |")
         for r in prob["rows"]:
             d = "—" if r["max_rel_diff"] is None else f"{r['max_rel_diff']:.1e}"
-            print(f"| {r['method']} | {r['median_s']:.3f} | {r['ratio_to_jacfwd']:.2f} | {d} |")
+            print(f"| {r['method']} | {r['median_s']:.4f} | {r['ratio_to_jacfwd']:.2f} | "
+                  f"{r['residual_evaluations']:.1f} | {d} |")
     print(f"\nload average before/after: {results['machine']['loadavg_before']} / "
           f"{results['machine']['loadavg_after']}, torch threads {results['machine']['threads']}")
     if args.json:

@@ -16,7 +16,6 @@ from lensopt.analysis.psf_stack import PsfSettings, compute_psfs
 from lensopt.analysis.spot import spot_stats
 from lensopt.errors import LensoptError
 from lensopt.imaging.io import linear_to_srgb, read_image, write_image
-from lensopt.imaging.metrics import psnr, ssim
 from lensopt.imaging.plan import PlanOptions, channel_weights, parse_effects
 from lensopt.imaging.simulate import plan_scene, run_plan
 from lensopt.optics.sampling import PupilSampling
@@ -50,8 +49,11 @@ def run_simulate(
     overlap: float = 0.25,
     seed: int = 0,
     on_plan: Callable[[dict[str, Any]], None] | None = None,
+    score: bool = False,
 ) -> dict[str, Any]:
-    """Plan, report the plan through ``on_plan`` (before running), simulate, write, score.
+    """Plan, report the plan through ``on_plan`` (before running), simulate, write, and score (PSNR/SSIM)
+    against ``reference``, or against the input scene when ``score`` — only when asked: SSIM of a
+    4000 × 3000 image costs seconds and gigabytes, more than the simulation itself.
 
     Returns the plan (``plan_only``) or {plan, timings, output, encodings, metrics}.
     """
@@ -76,16 +78,19 @@ def run_simulate(
         res = run_plan(camera, plan, pilot, reg, sensor, img, opts, timings)
     encoding = write_image(output, res.image, info)
     metrics = None
-    if reference is not None:
-        ref, ref_info = read_image(reference, option="--reference")
-        if ref.shape != res.image.shape:
-            raise LensoptError(f"must have the simulated image's shape {res.image.shape}", path="--reference",
-                               got=ref.shape)
-        against = str(reference)
-    else:
-        ref, against = img, "the input scene"
-    metrics = {"against": against, "psnr_db": psnr(linear_to_srgb(ref), linear_to_srgb(res.image)),
-               "ssim": ssim(linear_to_srgb(ref), linear_to_srgb(res.image)), "space": "sRGB-encoded [0, 1]"}
+    if reference is not None or score:
+        from lensopt.imaging.metrics import psnr, ssim  # skimage (and scipy) only when scoring
+
+        if reference is not None:
+            ref, _ = read_image(reference, option="--reference")
+            if ref.shape != res.image.shape:
+                raise LensoptError(f"must have the simulated image's shape {res.image.shape}", path="--reference",
+                                   got=ref.shape)
+            against = str(reference)
+        else:
+            ref, against = img, "the input scene"
+        metrics = {"against": against, "psnr_db": psnr(linear_to_srgb(ref), linear_to_srgb(res.image)),
+                   "ssim": ssim(linear_to_srgb(ref), linear_to_srgb(res.image)), "space": "sRGB-encoded [0, 1]"}
     return {"plan": plan_json, "timings": timings, "output": str(output), "output_encoding": encoding,
             "input_encoding": f"{info.encoding} {info.bits}-bit {'float' if info.is_float else 'integer'}"
                               + (" (linearized)" if info.encoding == "sRGB" else ""),

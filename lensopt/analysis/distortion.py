@@ -25,5 +25,6 @@ def distortion(lens: Lens, system: System, bundle: Bundle, stats: SpotStats) -> 
     The denominator is the paraxial height of the field with the largest |y'| (the outermost field).
     """
     y_par = paraxial_heights(lens, system, bundle)
-    outer = y_par[torch.argmax(y_par.detach().abs())]
+    # gather with a tensor index, not y_par[tensor]: no .item(), so torch.compile keeps one graph.
+    outer = y_par.gather(0, torch.argmax(y_par.detach().abs()).reshape(1)).squeeze(0)
     return (stats.centroid[:, 1] - y_par) / outer

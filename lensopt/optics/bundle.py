@@ -176,7 +176,7 @@ def trace_bundle(
         if mode != "none":
             raise ValueError("two-dimensional fields (rel_field_x) are traced with aim = none only")
         tan_x = field_tangents(lens, system, rel_field_x.to(lens.dtype))
-    pupil = pupil.to(lens.dtype)
+    pupil = pupil.to(dtype=lens.dtype, device=lens.device)
     if lens.placement is not None and half_pupil:  # no symmetry: the mirrored half too
         pupil = torch.cat([pupil, pupil * torch.tensor([-1.0, 1.0], dtype=pupil.dtype, device=pupil.device)], -2)
         half_pupil = False

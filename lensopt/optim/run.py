@@ -12,13 +12,16 @@ import torch
 
 from lensopt.errors import LensoptError
 from lensopt.optim.adam import AdamOptimizer
+from lensopt.optim.compiled_jacobian import CompiledJacobian
 from lensopt.optim.image_objective import psnr_db
 from lensopt.optim.lm import LevenbergMarquardt, Trial
 from lensopt.optim.problem import Problem
 from lensopt.optim.writeback import BoundGlass, bind_glasses, to_spec
 from lensopt.spec.models import LensSpec
 
-__all__ = ["Progress", "OptimizeResult", "OptimizeError", "optimize", "make_optimizer"]
+__all__ = ["Progress", "OptimizeResult", "OptimizeError", "optimize", "make_optimizer", "resolve_device", "JACOBIANS"]
+
+JACOBIANS = ("eager", "compiled")
 
 
 class OptimizeError(LensoptError):
@@ -95,32 +98,63 @@ class OptimizeResult:
     image_history: list[tuple[int, float]] = field(default_factory=list)
 
 
-def make_optimizer(problem: Problem, theta: torch.Tensor, method: str) -> LevenbergMarquardt | AdamOptimizer:
-    """An LM or Adam state machine on ``problem``'s residual function."""
+def make_optimizer(problem: Problem, theta: torch.Tensor, method: str,
+                   jacobian: str = "eager") -> LevenbergMarquardt | AdamOptimizer:
+    """An LM or Adam state machine on ``problem``'s residual function; ``jacobian``: ``eager``
+    (``Problem.jacobian``) or ``compiled`` (``CompiledJacobian``, same values; LM only)."""
+    if jacobian not in JACOBIANS:
+        raise LensoptError(f"must be one of {', '.join(JACOBIANS)}", path="--jacobian", got=jacobian)
     if method == "lm":
         def evaluate(t: torch.Tensor) -> Trial:
             ev = problem.evaluate(t)
             return Trial(ev.residuals, ev.physical, ev.reason)
 
-        return LevenbergMarquardt(theta, problem.jacobian, evaluate, problem.opt.lm)
+        jac = problem.jacobian if jacobian == "eager" else CompiledJacobian(problem)
+        return LevenbergMarquardt(theta, jac, evaluate, problem.opt.lm)
     if method == "adam":
         return AdamOptimizer(theta, problem.residuals, problem.check, problem.opt.adam)
     raise LensoptError("must be lm or adam", path="--optimizer", got=method)
 
 
+def resolve_device(device: str | None) -> torch.device:
+    """``--device``: a torch device name (cpu, cuda, cuda:1, mps); an error when it is unusable here."""
+    if device is None:
+        return torch.device("cpu")
+    try:
+        dev = torch.device(device)
+    except RuntimeError:
+        raise LensoptError("not a device name (cpu, cuda, cuda:N, mps)", path="--device", got=device) from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise LensoptError("CUDA is not available on this machine (torch "
+                           f"{torch.__version__}); use --device cpu", path="--device", got=device)
+    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
+        raise LensoptError(f"this machine has {torch.cuda.device_count()} CUDA device(s)", path="--device", got=device)
+    if dev.type == "mps" and not torch.backends.mps.is_available():
+        raise LensoptError("MPS is not available on this machine; use --device cpu", path="--device", got=device)
+    if dev.type not in ("cpu", "cuda", "mps"):
+        raise LensoptError("expected cpu, cuda, cuda:N or mps", path="--device", got=device)
+    return dev
+
+
 def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None = None, seed: int = 0,
-             callback: Callable[[Progress], None] | None = None) -> OptimizeResult:
+             callback: Callable[[Progress], None] | None = None, device: str | torch.device | None = None,
+             jacobian: str = "eager") -> OptimizeResult:
     """Optimize ``spec`` (its ``vary`` lists and ``[optimize]`` section).
 
     Ctrl-C (KeyboardInterrupt) ends the run early; the result then holds the best lens so far.
+    ``device``: where the problem's tensors live (default CPU); ``jacobian``: ``eager`` or
+    ``compiled`` (see ``make_optimizer``).
 
     Raises:
         OptimizeError: nothing varies, or the start lens is not usable (the message says why).
     """
     t0 = time.perf_counter()
+    dev = device if isinstance(device, torch.device) else resolve_device(device)
+    if jacobian not in JACOBIANS:
+        raise LensoptError(f"must be one of {', '.join(JACOBIANS)}", path="--jacobian", got=jacobian)
     opt0 = spec.optimize
     method = optimizer or (opt0.optimizer if opt0 is not None else "lm")
-    problem = Problem(spec, seed=seed, method=method)
+    problem = Problem(spec, seed=seed, method=method, device=dev)
     opt = problem.opt
     total = steps if steps is not None else opt.steps
     if problem.num_variables == 0:
@@ -137,7 +171,7 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
         result.start_esr_um = 1e3 * problem.spot_esr_mm(problem.theta0)
         result.start_psnr_db = problem.image.held_out_psnr(problem.lens(problem.theta0)[0])
     bind_step = round(opt.bind_at * total) if problem.num_glasses and opt.bind_at < 1 else None
-    state = make_optimizer(problem, problem.theta0, method)
+    state = make_optimizer(problem, problem.theta0, method, jacobian)
     phase = "glasses free" if problem.num_glasses else "fixed glasses"
     failing = 1.0 - start.valid_fraction
     event = f"{100 * failing:.1f} % of the rays fail at the start" if failing > 0 else ""
@@ -145,7 +179,7 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
     try:
         while k < total:
             if bind_step is not None and k >= bind_step and not result.bound:
-                problem, state, event = _bind(problem, state, result, method, seed)
+                problem, state, event = _bind(problem, state, result, method, seed, jacobian)
                 phase = "glasses bound"
             frac = k / total
             scale = problem.row_scale(frac)
@@ -180,7 +214,7 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
         else:
             result.stop_reason = f"{total} steps"
         if bind_step is not None and not result.bound and bind_step <= k and not result.interrupted:
-            problem, state, _ = _bind(problem, state, result, method, seed)
+            problem, state, _ = _bind(problem, state, result, method, seed, jacobian)
     except KeyboardInterrupt:
         result.interrupted = True
         result.stop_reason = "interrupted"
@@ -225,15 +259,16 @@ def _valid_fraction(problem: Problem, r: torch.Tensor | None) -> float:
     return float((rows == 0).to(r.dtype).mean())
 
 
-def _bind(problem: Problem, state, result: OptimizeResult, method: str, seed: int):  # noqa: ANN001, ANN202
+def _bind(problem: Problem, state, result: OptimizeResult, method: str, seed: int,  # noqa: ANN001, ANN202
+          jacobian: str = "eager"):
     """Bind glasses to the catalog, rebuild the problem without glass variables, reset the optimizer."""
     spec, bound = bind_glasses(problem, state.theta)
     if spec.optimize is not None and spec.optimize.sampling_after_binding:
         spec.optimize = spec.optimize.model_copy(update={"sampling": spec.optimize.sampling_after_binding})
-    new = Problem(spec, seed=seed, method=method)
+    new = Problem(spec, seed=seed, method=method, device=problem.device)
     ev = new.evaluate(new.theta0)
     if not ev.physical:
         raise OptimizeError(f"binding the glasses to the catalog made the lens unusable: {ev.reason}")
     result.bound = bound
     names = ", ".join(b.name for b in bound)
-    return new, make_optimizer(new, new.theta0, method), f"bound glasses: {names}"
+    return new, make_optimizer(new, new.theta0, method, jacobian), f"bound glasses: {names}"

@@ -101,13 +101,15 @@ class Parameterization:
         glass: whitened glass space (needed when a material varies).
         asphere_basis: ``monomial`` or ``bezier``.
         skip: (kind, surface) pairs that are solved and so must not be in θ.
+        dtype, device: of the lens tensors and θ (default device: the CPU).
     """
 
     def __init__(self, spec: LensSpec, *, alpha: float, glass: GlassSpace | None,
                  asphere_basis: str = "monomial", skip: frozenset[tuple[str, int]] = frozenset(),
-                 dtype: torch.dtype = torch.float64) -> None:
+                 dtype: torch.dtype = torch.float64, device: torch.device | str | None = None) -> None:
         self.spec = prepare_spec(spec)
-        self.model: Model = build(self.spec, dtype=dtype)
+        self.model: Model = build(self.spec, dtype=dtype, device=device)
+        self.device = self.model.lens.device
         self.alpha = alpha
         self.glass = glass
         self.asphere_basis = asphere_basis
@@ -160,7 +162,7 @@ class Parameterization:
             if asph != list(range(4, 4 + 2 * len(asph), 2)):
                 raise SpecError("the bezier basis needs the consecutive powers 4, 6, … varied",
                                 path=f"surfaces[{s}].vary", got=asph)
-            self._bezier[s] = bernstein_to_monomial(len(asph), dtype=self.dtype)
+            self._bezier[s] = bernstein_to_monomial(len(asph), dtype=self.dtype).to(self.device)
         # θ order within a surface: as declared, with the asphere powers ascending (Bézier points).
         rest = [(k, p) for k, p in out if k != "asphere"]
         return rest + [("asphere", p) for p in asph]
@@ -194,7 +196,7 @@ class Parameterization:
             for i, c in zip(pos, control.unbind(), strict=True):
                 vals[i] = c
         if not vals:
-            return torch.zeros(0, dtype=self.dtype)
+            return torch.zeros(0, dtype=self.dtype, device=self.device)
         return torch.cat([x.reshape(-1) for x in vals])
 
     def _glass_values(self, s: int) -> Tensor:
@@ -205,7 +207,7 @@ class Parameterization:
         elif isinstance(mat, CatalogGlass):
             dpgf = mat.glass.dpgf or 0.0
         vals = [mat.nd, mat.vd, dpgf][: self.glass.dims]
-        return torch.tensor(vals, dtype=self.dtype)
+        return torch.tensor(vals, dtype=self.dtype, device=self.device)
 
     def glass_physical(self, theta: Tensor) -> Tensor:
         """(G, 3) (nd, vd, ΔPgF) of every glass variable (ΔPgF = 0 with 2 glass parameters)."""
@@ -215,13 +217,13 @@ class Parameterization:
             if v.size == 2:
                 x = torch.cat([x, torch.zeros_like(x[:1])])
             rows.append(x)
-        return torch.stack(rows) if rows else torch.zeros(0, 3, dtype=theta.dtype)
+        return torch.stack(rows) if rows else torch.zeros(0, 3, dtype=theta.dtype, device=theta.device)
 
     def glass_g(self, theta: Tensor) -> Tensor:
         """(G, d) whitened glass variables."""
         rows = [theta[v.index : v.index + v.size] for v in self.of_kind("glass")]
         d = self.glass.dims if self.glass is not None else 2
-        return torch.stack(rows) if rows else torch.zeros(0, d, dtype=theta.dtype)
+        return torch.stack(rows) if rows else torch.zeros(0, d, dtype=theta.dtype, device=theta.device)
 
     def lens(self, theta: Tensor) -> Lens:
         """The lens for θ (solved quantities still at their spec values)."""

@@ -37,7 +37,7 @@ def test_simulate_writes_an_image_and_reports_stages(tmp_path: Path) -> None:
     write_image(small, img[:100, :150, :1], info)
     out = tmp_path / "out.png"
     r = runner.invoke(app, ["simulate", COOKE, str(small), "-o", str(out), "--region", "corner", "--rays",
-                            "rings:8", "--json"])
+                            "rings:8", "--json", "--score"])
     assert r.exit_code == 0, r.output
     res = json.loads(r.stdout)
     assert res["plan"]["channels"] == ["Y"]
@@ -49,6 +49,10 @@ def test_simulate_writes_an_image_and_reports_stages(tmp_path: Path) -> None:
     r2 = runner.invoke(app, ["simulate", COOKE, str(small), "-o", str(out), "--region", "corner", "--rays",
                              "rings:8"])
     assert r2.exit_code == 0 and "plan — Cooke triplet" in r2.stdout and "wrote" in r2.stderr
+    assert "PSNR" not in r2.stdout  # scored only when asked (--score or --reference)
+    r3 = runner.invoke(app, ["simulate", COOKE, str(small), "-o", str(out), "--region", "corner", "--rays",
+                             "rings:8", "--json"])
+    assert r3.exit_code == 0 and json.loads(r3.stdout)["metrics"] is None
 
 
 def test_errors_are_one_line_with_exit_code_2(tmp_path: Path) -> None:

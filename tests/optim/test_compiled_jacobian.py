@@ -1,0 +1,89 @@
+"""The compiled LM Jacobian (optim/compiled_jacobian.py) equals the eager forward-mode Jacobian.
+
+Oracle: ``Problem.jacobian`` (eager ``torch.func.jacfwd``, itself checked against reverse mode and
+central differences in test_jacobian.py). The default tests check the captured graph run as Python
+(no compiler: the capture is what can go wrong — a dropped dependency, a baked-in branch); the
+Inductor-compiled graph is checked by the slow test (its compile takes minutes on a loaded machine).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import pytest
+import torch
+
+from lensopt.optim import Problem
+from lensopt.optim.compiled_jacobian import CompiledJacobian, capture_jacobian
+from lensopt.spec import load_spec, parse_spec
+
+SPECS = Path(__file__).resolve().parents[2] / "specs"
+
+
+def _small_problem(make_cooke) -> Problem:  # noqa: ANN001
+    data = make_cooke(constraints={"ray_failure": {"penalty_mm": 2.0}, "distortion": {"max_percent": 0.01}})
+    for s in (0, 2, 4):
+        data["surfaces"][s]["vary"] = ["radius", "thickness"]
+    data["system"]["field"]["relative"] = [0.0, 1.0]
+    return Problem(parse_spec(data))
+
+
+def _rel(a: torch.Tensor, b: torch.Tensor) -> float:
+    return float((a - b).abs().max() / b.abs().max())
+
+
+def test_captured_graph_equals_eager_jacfwd(make_cooke) -> None:  # noqa: ANN001
+    p = _small_problem(make_cooke)
+    J0, r0 = p.jacobian(p.theta0)
+    assert J0.shape == (p.size, 6) and bool((J0.abs().sum(0) > 0).all())
+    gm = capture_jacobian(p.residuals, p.theta0)
+    J, r = gm(p.theta0)
+    assert _rel(J, J0) <= 1e-12 and _rel(r, r0) <= 1e-12
+    # Another θ (a step away): the graph depends on θ, nothing of θ0 is baked in.
+    theta = p.theta0 + 0.01 * torch.linspace(-1, 1, 6, dtype=torch.float64)
+    J1, r1 = p.jacobian(theta)
+    J2, r2 = gm(theta)
+    assert _rel(J1, J0) > 1e-4  # the point really moved
+    assert _rel(J2, J1) <= 1e-12 and _rel(r2, r1) <= 1e-12
+
+    # The failure-margin walk is skipped in eager when no ray fails (as at θ0, where the graph was
+    # captured); the graph must keep it, so that a θ where rays fail gets the same rows as eager.
+    theta = p.theta0.clone()
+    theta[0] *= 3.0  # a much stronger first surface: marginal rays fail
+    assert p.failure_summary(theta)[0] > 0
+    J1, r1 = p.jacobian(theta)
+    J2, r2 = gm(theta)
+    assert bool(r1[p.slices["ray_failure"]].abs().max() > 0)
+    assert _rel(J2, J1) <= 1e-12 and _rel(r2, r1) <= 1e-12
+
+
+class _Branching:
+    """A residual function with a branch on θ (which a captured graph cannot represent)."""
+
+    def residuals(self, theta: torch.Tensor) -> torch.Tensor:
+        return theta**2 if bool(theta.sum() > 0) else -theta
+
+    def jacobian(self, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return torch.func.jacfwd(self.residuals)(theta), self.residuals(theta)
+
+
+def test_branch_on_theta_falls_back_to_eager(caplog) -> None:  # noqa: ANN001
+    theta = torch.tensor([1.0, 2.0], dtype=torch.float64)
+    jac = CompiledJacobian(_Branching(), backend="graph")
+    with caplog.at_level(logging.WARNING, logger="lensopt.optim.compiled_jacobian"):
+        J, r = jac(theta)
+    assert not jac.compiled and jac.failed and "eager" in caplog.text
+    torch.testing.assert_close(J, torch.diag(2 * theta), rtol=0, atol=0)  # d(θ²)/dθ = 2θ
+    J, r = jac(-theta)  # the other branch: eager follows it
+    torch.testing.assert_close(J, -torch.eye(2, dtype=torch.float64), rtol=0, atol=0)
+
+
+@pytest.mark.slow
+def test_inductor_compiled_jacobian_equals_eager_on_cooke() -> None:
+    p = Problem(load_spec(SPECS / "cooke_triplet_opt.toml"))
+    jac = CompiledJacobian(p)
+    J, r = jac(p.theta0)
+    assert jac.compiled, jac.failed
+    J0, r0 = p.jacobian(p.theta0)
+    assert _rel(J, J0) <= 1e-12 and _rel(r, r0) <= 1e-12
