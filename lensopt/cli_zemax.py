@@ -16,7 +16,7 @@ __all__ = ["register"]
 OutputOpt = Annotated[Path, typer.Option("--output", "-o", help="Output file.")]
 ZmxArg = Annotated[Path, typer.Argument(help="Zemax sequential lens file (.zmx, UTF-16 or ASCII).")]
 CatalogOpt = Annotated[list[Path] | None, typer.Option(
-    "--catalog", help="Zemax AGF glass catalog to look glasses up in first (repeatable).")]
+    "--catalog", metavar="FILE.agf", help="Zemax AGF glass catalog to look glasses up in first (repeatable).")]
 
 
 @handle_errors

@@ -44,6 +44,10 @@ __all__ = ["export_zemax", "write_zemax"]
 _MAX_POWER = 16  # EVENASPH / BINARY_2 PARM 8 is r^16
 
 
+def _one_line(text: str) -> str:
+    return " ".join(text.split())
+
+
 def _num(x: float) -> str:
     return fmt_exact(x)
 
@@ -70,7 +74,7 @@ def export_zemax(spec: LensSpec) -> str:
         extras["vignetting"] = spec.system.vignetting.model_dump()
     if spec.image.defocus != 0:
         extras["defocus"] = spec.image.defocus
-    lines = ["MODE SEQ", f"NAME {spec.name}"]
+    lines = ["VERS 190513 80 123457", "MODE SEQ", f"NAME {_one_line(spec.name)}"]
     body = ["UNIT MM X W X CM MR CPMM"]
     ap = spec.system.aperture
     body.append(f"ENPD {_num(ap.epd)}" if ap.epd is not None else f"FNUM {_num(ap.fnumber)} 0")
@@ -102,23 +106,39 @@ def export_zemax(spec: LensSpec) -> str:
              "  DISZ " + ("INFINITY" if obj == "infinity" else _num(obj.distance))]
     surf_extras: dict[str, Any] = {}
     last = len(spec.surfaces) - 1
-    if spec.elements:
-        raise SpecError("element decenters/tilts ([[elements]]) have no export to Zemax yet", path="elements")
+    starts, ends = _elements(spec)
     number = 0
     for i, surf in enumerate(spec.surfaces):
         thickness = surf.thickness + (spec.image.defocus if i == last else 0.0)
+        if i in starts:  # a moved element: the break before its first surface
+            el = starts[i]
+            number += 1
+            body += _coordbrk(number, *el.decenter, *el.tilt_deg, 0, 0.0)
         moved = any(surf.decenter or (0.0,)) or any(surf.tilt_deg or (0.0,))
-        if moved and surf.decenter_mode != "basic":
-            raise SpecError("a decenter-and-return surface has no Zemax export yet (basic decenters are written "
-                            "as coordinate breaks)", path=f"surfaces[{i}].decenter_mode")
+        dx, dy = surf.decenter or (0.0, 0.0)
+        ax, ay = surf.tilt_deg or (0.0, 0.0)
         if moved:  # a coordinate break right before the surface: Zemax's basic decenter/tilt
             number += 1
-            dx, dy = surf.decenter or (0.0, 0.0)
-            ax, ay = surf.tilt_deg or (0.0, 0.0)
-            body += [f"SURF {number}", "  TYPE COORDBRK", "  CURV 0", f"  PARM 1 {_num(dx)}", f"  PARM 2 {_num(dy)}",
-                     f"  PARM 3 {_num(ax)}", f"  PARM 4 {_num(ay)}", "  PARM 5 0", "  PARM 6 0", "  DISZ 0"]
+            body += _coordbrk(number, dx, dy, ax, ay, 0, 0.0)
         number += 1
-        body += _surface(surf, number - 1, thickness, glass_lines[i], path=f"surfaces[{i}]")
+        returns = moved and surf.decenter_mode != "basic"
+        closes = i in ends
+        body += _surface(surf, number - 1, 0.0 if returns or closes else thickness, glass_lines[i],
+                         path=f"surfaces[{i}]")
+        if returns:  # decenter-and-return: the inverse break (order flag 1, negated values) carries the gap
+            number += 1
+            body += _coordbrk(number, -dx, -dy, -ax, -ay, 1, thickness)
+        if closes:  # back along the moved axis to the element's first vertex, then the inverse break
+            el = ends[i]
+            inner = 0.0
+            for k in range(el.surfaces[0], el.surfaces[1]):
+                inner += spec.surfaces[k].thickness
+            number += 2
+            body += [f"SURF {number - 1}", "  TYPE STANDARD", "  CURV 0", f"  DISZ {_num(-inner)}"]
+            if glass_lines[i]:
+                body.append(f"  GLAS {glass_lines[i]}")
+            body += _coordbrk(number, -el.decenter[0], -el.decenter[1], -el.tilt_deg[0], -el.tilt_deg[1], 1,
+                              inner + thickness)
         extra: dict[str, Any] = {}
         if surf.vary:
             extra["vary"] = list(surf.vary)
@@ -169,6 +189,37 @@ def _glasses(spec: LensSpec, model: Any) -> tuple[list[str], list[str]]:
     return out, gcat
 
 
+def _elements(spec: LensSpec) -> tuple[dict[int, Any], dict[int, Any]]:
+    """Moved elements by first and by last surface; overlapping elements, and surface decenters inside an
+    element, have no single Zemax form here and are refused."""
+    starts: dict[int, Any] = {}
+    ends: dict[int, Any] = {}
+    taken: set[int] = set()
+    for n, el in enumerate(spec.elements or []):
+        if not (any(el.decenter) or any(el.tilt_deg)):
+            continue
+        first, last = el.surfaces
+        inside = set(range(first, last + 1))
+        if inside & taken:
+            raise SpecError("overlapping moved elements cannot be written as Zemax coordinate breaks",
+                            path=f"elements[{n}].surfaces")
+        for k in inside:
+            s = spec.surfaces[k]
+            if any(s.decenter or (0.0,)) or any(s.tilt_deg or (0.0,)):
+                raise SpecError("a decentered surface inside a moved element cannot be written as Zemax "
+                                "coordinate breaks", path=f"surfaces[{k}].decenter")
+        taken |= inside
+        starts[first], ends[last] = el, el
+    return starts, ends
+
+
+def _coordbrk(number: int, dx: float, dy: float, ax: float, ay: float, order: int, thickness: float) -> list[str]:
+    """A COORDBRK block: decenter (dx, dy) mm, tilts about x and y (degrees), order flag, thickness."""
+    return [f"SURF {number}", "  TYPE COORDBRK", "  CURV 0", f"  PARM 1 {_num(dx)}", f"  PARM 2 {_num(dy)}",
+            f"  PARM 3 {_num(ax)}", f"  PARM 4 {_num(ay)}", "  PARM 5 0", f"  PARM 6 {order}",
+            f"  DISZ {_num(thickness)}"]
+
+
 def _surface(surf: Any, i: int, thickness: float, glass: str, *, path: str) -> list[str]:
     """The SURF block of ``surf``, numbered i + 1; errors name the spec ``path``."""
     base = surf.base if isinstance(surf, DiffractiveSurface) else surf
@@ -183,7 +234,7 @@ def _surface(surf: Any, i: int, thickness: float, glass: str, *, path: str) -> l
     if surf.stop:
         out.append("  STOP")
     if surf.label:
-        out.append(f"  COMM {surf.label}")
+        out.append(f"  COMM {_one_line(surf.label)}")
     if isinstance(surf, DiffractiveSurface):
         out.append("  TYPE BINARY_2")
     elif coefficients:

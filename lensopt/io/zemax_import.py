@@ -56,6 +56,8 @@ _SILENT = frozenset("VERS PFIL LANG ENVD GFAC PUSH SDMA OMMA ROPD PICB POLS GLRS
 _APERTURE_IGNORED = {"SQAP": "rectangular aperture", "ELAP": "elliptical aperture", "OBSC": "obscuration",
                      "OBDC": "aperture decenter", "SCBD": "coordinate return / tilt-decenter data"}
 _MERIT = "merit function / tolerance data"
+#: Where a coordinate break's dummy surface keeps its Zemax values until the surfaces are complete.
+_CB_KEY = "_zemax_coordbrk"
 
 
 @dataclass
@@ -101,6 +103,7 @@ class ZFile:
     scale: float = 1.0
     extras: dict[str, Any] = field(default_factory=dict)
     notices: list[str] = field(default_factory=list)
+    elements: list[dict[str, Any]] = field(default_factory=list)
 
     def last(self, key: str) -> tuple[int, list[str]] | None:
         items = self.system.get(key)
@@ -340,7 +343,8 @@ def coordinate_break(zf: ZFile, s: ZSurface, medium: Any, scale: float) -> dict[
     Zemax: ``PARM 1``/``2`` decenter x/y, ``PARM 3``/``4``/``5`` tilt about x/y/z (degrees), ``PARM 6``
     order flag (0: decenter, then tilt x, then about the new y, then z). lensopt's placement is the same
     (decenter, then α about x, then β about the new y); a tilt about z, and order flag 1 with both a
-    decenter and a tilt, are refused.
+    decenter and a tilt, are refused (except as the second break of a decenter-and-return pair, which
+    :func:`_return_pair` reads first).
     """
     dx, dy, ax, ay, az = (s.parm.get(k, 0.0) for k in range(1, 6))
     order = s.parm.get(6, 0.0)
@@ -354,12 +358,63 @@ def coordinate_break(zf: ZFile, s: ZSurface, medium: Any, scale: float) -> dict[
     if not (dx or dy or ax or ay):
         return None
     surf: dict[str, Any] = {"type": "plane", "thickness": s.thickness * scale, "material": medium,
-                            "decenter_mode": "basic", "label": s.comment or f"COORDBRK {s.number}"}
+                            "decenter_mode": "basic", "label": s.comment or f"COORDBRK {s.number}",
+                            _CB_KEY: (dx, dy, ax, ay, order, s.thickness)}
     if dx or dy:
         surf["decenter"] = [dx * scale, dy * scale]
     if ax or ay:
         surf["tilt_deg"] = [ax, ay]
     return surf
+
+
+def _return_pair(out: list[dict[str, Any]], s: ZSurface, scale: float) -> bool:
+    """Zemax's decenter-and-return: a break (order 0, no thickness), one surface with no thickness, and this
+    break with order flag 1 and exactly the negated decenters/tilts, which undoes the first. The surface
+    then gets lensopt's ``return`` decenter/tilt and this break's thickness (what ``export_zemax`` writes)."""
+    if len(out) < 2 or s.parm.get(6, 0.0) == 0 or s.parm.get(5, 0.0) != 0:
+        return False
+    first, surface = out[-2].get(_CB_KEY), out[-1]
+    if first is None or _CB_KEY in surface or surface["thickness"] != 0 or first[4] != 0 or first[5] != 0:
+        return False
+    if tuple(-s.parm.get(k, 0.0) for k in range(1, 5)) != tuple(first[:4]):
+        return False
+    dx, dy, ax, ay = first[:4]
+    del out[-2]
+    surface["thickness"] = s.thickness * scale
+    surface["decenter_mode"] = "return"
+    if dx or dy:
+        surface["decenter"] = [dx * scale, dy * scale]
+    if ax or ay:
+        surface["tilt_deg"] = [ax, ay]
+    return True
+
+
+def _element_return(out: list[dict[str, Any]], s: ZSurface, scale: float) -> dict[str, Any] | None:
+    """Zemax's tilted/decentered element: a break (order 0, no thickness) before surfaces first..last (the
+    last without thickness), a plane dummy going back −L along the moved axis (L = the element's inner
+    thicknesses), and this break with order flag 1 and the negated values, carrying L + the gap after the
+    element. Returns lensopt's element placement (surfaces removed from ``out`` accordingly), or None."""
+    if s.parm.get(6, 0.0) == 0 or s.parm.get(5, 0.0) != 0 or len(out) < 3:
+        return None
+    back = tuple(-s.parm.get(k, 0.0) for k in range(1, 5))
+    j = next((k for k in range(len(out) - 3, -1, -1) if _CB_KEY in out[k]), None)
+    if j is None:
+        return None
+    first, group, dummy = out[j][_CB_KEY], out[j + 1:-1], out[-1]
+    if first[4] != 0 or first[5] != 0 or tuple(first[:4]) != back or not group:
+        return None
+    if dummy.get("type") != "plane" or dummy.get("label") or any(_CB_KEY in g for g in group):
+        return None
+    inner = 0.0
+    for g in group[:-1]:
+        inner += g["thickness"]
+    if group[-1]["thickness"] != 0 or dummy["thickness"] != -inner:
+        return None
+    group[-1]["thickness"] = s.thickness * scale + dummy["thickness"]
+    del out[-1]
+    del out[j]
+    dx, dy, ax, ay = first[:4]
+    return {"surfaces": [j, j + len(group) - 1], "decenter": [dx * scale, dy * scale], "tilt_deg": [ax, ay]}
 
 
 def _lens_surfaces(zf: ZFile, catalogs: Any, extras: dict[str, Any], warnings: list[str]) -> list[dict[str, Any]]:
@@ -376,6 +431,17 @@ def _lens_surfaces(zf: ZFile, catalogs: Any, extras: dict[str, Any], warnings: l
         if s.type == "COORDBRK":
             if s.stop:
                 raise SpecError(f"line {s.line}: the stop is on a coordinate break", path=src)
+            if _return_pair(out, s, scale):
+                warnings.append(f"surface {s.number}: coordinate-break pair imported as a decenter-and-return of "
+                                "the surface between them")
+                continue
+            element = _element_return(out, s, scale)
+            if element is not None:
+                zf.elements.append(element)
+                plain -= 1  # the element's return dummy is no lensopt surface
+                warnings.append(f"surface {s.number}: coordinate-break pair imported as a rigid decenter/tilt "
+                                f"of the element of surfaces {element['surfaces'][0]}..{element['surfaces'][1]}")
+                continue
             medium = out[-1]["material"] if out else "air"
             dummy = coordinate_break(zf, s, medium, scale)
             if dummy is None and not out:  # before the first surface: keep its gap as a dummy plane
@@ -400,6 +466,8 @@ def _lens_surfaces(zf: ZFile, catalogs: Any, extras: dict[str, Any], warnings: l
             warnings.append(f"surface {s.number}: ignored {item}")
     if not out:
         raise SpecError("no lens surfaces between the object and the image", path=src)
+    for surf in out:
+        surf.pop(_CB_KEY, None)
     return out
 
 

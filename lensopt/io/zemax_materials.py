@@ -31,7 +31,7 @@ def material(zf: Any, s: Any, catalogs: Any, gcat: list[str], extra: dict[str, A
     if upper == "MIRROR":
         raise SpecError(f"{where}: mirrors (GLAS MIRROR) are not supported: lensopt traces refractive systems only",
                         path=src)
-    if upper == "___BLANK":
+    if upper in ("___BLANK", "MODEL"):  # OpticStudio writes ___BLANK, optiland's writer MODEL
         values = [t for t in s.glass[1:]]
         try:
             nd, vd = float(values[2]), float(values[3])
@@ -52,6 +52,9 @@ def material(zf: Any, s: Any, catalogs: Any, gcat: list[str], extra: dict[str, A
                     return ex
             except LensoptError:
                 pass
+        note = f"model glass nd {nd:g}, vd {vd:g}, ΔPgF {dpgf:g}: lensopt's Hartmann dispersion"
+        if not any(note in w for w in warnings):
+            warnings.append(f"{note} (Zemax's model glass disperses slightly differently away from the d line)")
         return model
     ex = extra.get("material")
     if isinstance(ex, dict) and set(ex) == {"catalog", "glass"} and normalize_name(str(ex["glass"])) == \

@@ -98,6 +98,8 @@ def system_from_zemax(zf: Any, surfaces: list[dict[str, Any]], object_distance: 
         "surfaces": surfaces,
         "image": {"defocus": float(defocus)},
     }
+    if getattr(zf, "elements", None):
+        data["elements"] = zf.elements
     for key in ("aim_steps", "front_aperture", "sensor"):
         if key in extras:
             (data if key == "sensor" else data["system"])[key] = extras[key]
