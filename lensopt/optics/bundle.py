@@ -81,18 +81,21 @@ def pupil_shape(
         chief = aim_chief(lens, system, tan_field, **opts)
         zero = torch.zeros_like(chief.offset)
         factors = ellipse_to_factors(chief.offset, 1.0 + zero, 1.0 + zero)
+    fa = system.front_aperture
+    if fa is not None:
+        centre, radius = front_aperture_disc(fa.distance, fa.diameter, tan_field,
+                                             object_distance=system.object_distance, **opts)
     if aim == "full":
-        full = aim_full(lens, system, tan_field, steps=aim_steps, chief=chief, **opts)
+        # Behind a front aperture the vignetting comes first: only rays through the opening are aimed.
+        opening = None if fa is None else (centre[:, None], radius)
+        full = aim_full(lens, system, tan_field, steps=aim_steps, chief=chief, aperture=opening, **opts)
         factors = full.factors
     if vignetting is not None:
         vignetting = vignetting.to(lens.dtype).expand(num_f, num_w, 3)
         factors = vignetting if factors is None else compose_factors(factors, vignetting)
-    fa = system.front_aperture
     if fa is not None:
         if factors is None:
             factors = torch.zeros(num_f, num_w, 3, dtype=lens.dtype, device=lens.device)
-        centre, radius = front_aperture_disc(fa.distance, fa.diameter, tan_field,
-                                             object_distance=system.object_distance, **opts)
         ellipse, blocked = clip_ellipse_to_disc(factors_to_ellipse(factors), centre[:, None], radius,
                                                 lateral=fa.lateral)
         factors = ellipse_to_factors(*ellipse)
