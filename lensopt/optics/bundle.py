@@ -8,8 +8,10 @@ The launched pupil of each field and wavelength is an ellipse in relative entran
 (S19–S20), built in three layers: the aimed pupil (``none``: the paraxial unit disc; ``chief``: the
 disc shifted so that the chief ray meets the stop centre; ``full``: the ellipse whose marginal rays
 meet the stop edge, S21–S22), then fixed factors taken relative to it (``system.vignetting``, as CODE V
-applies VUY/VLY/VUX with ray aiming), then the front aperture's cut (S1.3.2, S4.1.5). Rays that fall
-outside the front aperture anyway are marked ``Status.BLOCKED``.
+applies VUY/VLY/VUX with ray aiming), then the front aperture's cut (S1.3.2, S4.1.5). With ``full``
+behind a front aperture the cut comes first (S1.3.2, last paragraph): ``aim_full`` aims only rays
+through the opening, holding a marginal ray the aperture cuts on its edge. Rays that fall outside the
+front aperture anyway are marked ``Status.BLOCKED``.
 """
 
 from __future__ import annotations

@@ -34,21 +34,22 @@ TOL = 0.01  # 1 % of the pupil radius
 
 
 @cache
-def _data(wavelengths: tuple[float, ...] | None = None) -> dict:
+def _data(wavelengths: tuple[float, ...] | None = None, lateral: str = "inscribed") -> dict:
     data = tomllib.loads(SPEC.read_text())
+    data["system"]["front_aperture"]["lateral"] = lateral
     if wavelengths is not None:
         data["spectrum"] = {"wavelengths_nm": list(wavelengths)}
     return data
 
 
 @cache
-def _model(wavelengths: tuple[float, ...] | None = None) -> Model:
-    return build(parse_spec(_data(wavelengths)))
+def _model(wavelengths: tuple[float, ...] | None = None, lateral: str = "inscribed") -> Model:
+    return build(parse_spec(_data(wavelengths, lateral)))
 
 
 @cache
-def _bundle(wavelengths: tuple[float, ...] | None = None):
-    m = _model(wavelengths)
+def _bundle(wavelengths: tuple[float, ...] | None = None, lateral: str = "inscribed"):
+    m = _model(wavelengths, lateral)
     with torch.no_grad():
         return trace_bundle(m.lens, m.system, torch.zeros(1, 2, dtype=F64))
 
@@ -101,6 +102,7 @@ def _dummy_model(stop_radius: float) -> Model:
 @pytest.mark.parametrize("field", [2, 3, 4])
 def test_factors_match_brute_force_with_aiming_behind_the_aperture(field: int) -> None:
     b = _bundle((550.0,))
+    ext = _bundle((550.0,), "extent").vignetting[field, 0]  # x: the aimed sagittal ray, no inscribing
     v = b.vignetting[field, 0]
     r = float(b.pupil_aim.stop_radius_mm)
     m = _dummy_model(r)
@@ -115,6 +117,7 @@ def test_factors_match_brute_force_with_aiming_behind_the_aperture(field: int) -
     assert float(v[0]) > 0.15  # really vignetted
     assert abs(float(v[0]) - (1.0 + float(p[:, 1].min()))) <= TOL  # V_i: the lowest point that passes
     assert abs(float(v[1]) - (1.0 - float(p[:, 1].max()))) <= TOL  # V_s: the highest
+    assert abs(float(ext[2]) - (1.0 - float(p[:, 0].abs().max()))) <= TOL  # V_l (extent): the widest
     # Inscribed lateral factor: never wider than the kept set. Every launched ray passes the aperture
     # (none BLOCKED) and the clipped first element, and meets the stop inside its edge up to the
     # ellipse's own approximation (S19–S20: the launched ellipse is not the exact image of the stop
@@ -129,3 +132,27 @@ def test_factors_match_brute_force_with_aiming_behind_the_aperture(field: int) -
     assert not bool((launched.result.status[field, 0] == Status.BLOCKED).any())
     assert bool(hit.valid[field, 0].all())
     assert float(hit.pos[field, 0, :, :2].norm(dim=-1).max()) <= r * (1.0 + 1e-4)
+
+
+def test_held_and_aimed_factors_are_differentiable_in_the_lens() -> None:
+    # The held bottom (the aperture's edge, moving with the entrance pupil) and the aimed top and
+    # sagittal rays: forward-mode derivative in the thickness of element 1 against central differences
+    # (converged aiming, so the last attached step gives the exact derivative).
+    import dataclasses
+
+    m = _model((550.0,))
+    lens, system = m.lens, m.system
+    zero = torch.zeros(1, 2, dtype=F64)
+
+    def f(t0: torch.Tensor) -> torch.Tensor:
+        ln = dataclasses.replace(lens, thickness=torch.cat([t0.reshape(1), lens.thickness[1:]]))
+        b = trace_bundle(ln, system, zero)
+        return torch.cat([b.vignetting[2:, 0].flatten(), b.pupil_aim.factors[2:, 0].flatten()])
+
+    t0 = lens.thickness[0].clone()
+    y, dy = torch.func.jvp(f, (t0,), (torch.ones_like(t0),))
+    h = 1e-6
+    fd = (f(t0 + h) - f(t0 - h)) / (2 * h)
+    assert bool(torch.isfinite(dy).all())
+    assert torch.allclose(dy, fd, rtol=1e-5, atol=1e-8)
+    assert float(dy.abs().max()) > 1e-3  # the factors do move with the lens
