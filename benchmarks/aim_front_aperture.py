@@ -26,8 +26,11 @@ from lensopt.optics.sampling import PupilSampling
 from lensopt.spec import build, parse_spec
 
 
-def run(spec: Path, old: bool) -> None:
-    m = build(parse_spec(tomllib.loads(spec.read_text())))
+def run(spec: Path, old: bool, aim_steps: int | None) -> None:
+    data = tomllib.loads(spec.read_text())
+    if aim_steps is not None:
+        data["system"]["aim_steps"] = aim_steps
+    m = build(parse_spec(data))
     pts = PupilSampling.parse("rings:12").points(dtype=torch.float64)
     aim_full = bundle_mod.aim_full
     if old:
@@ -54,9 +57,10 @@ def run(spec: Path, old: bool) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("spec", type=Path)
+    ap.add_argument("--aim-steps", type=int, default=None, help="override the spec's system.aim_steps")
     args = ap.parse_args()
     for old in (False, True):
-        run(args.spec, old)
+        run(args.spec, old, args.aim_steps)
 
 
 if __name__ == "__main__":
