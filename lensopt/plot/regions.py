@@ -1,21 +1,31 @@
 """Sensor tiles and one sampled batch (the picture of seed Figure S8): tiles coloured by their
-distance from the centre (relative radius 0 → 1), the batch's tiles outlined in red."""
+distance from the centre (relative radius 0 → 1), the batch's tiles outlined in red.
+
+Takes the tile grid as data (any object with the fields of ``imaging.regions.TileGrid``); plot does not
+import imaging (they are one layer, side by side)."""
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 import torch
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
-from lensopt.imaging.regions import TileGrid
 from lensopt.plot.style import RC, new_figure
 
 __all__ = ["plot_regions"]
 
 
-def plot_regions(grid: TileGrid, batch: torch.Tensor, *, title: str = "") -> Figure:
-    """``grid``'s tiles in sensor pixels (x right, y down, as on the sensor) and the tiles ``batch`` drew."""
+def plot_regions(grid: Any, batch: torch.Tensor, *, title: str = "") -> Figure:
+    """``grid``'s tiles in sensor pixels (x right, y down, as on the sensor) and the tiles ``batch`` drew.
+
+    Args:
+        grid: a ``TileGrid``: ``sensor`` (width, height), ``patch``, ``cols``, ``rows`` and per-tile ``col``,
+            ``row``, ``origin_px`` ``[N, 2]``, ``radius_rel`` ``[N]``.
+        batch: ``[B]`` tile indices into ``grid``.
+    """
     import matplotlib
 
     with matplotlib.rc_context(RC):

@@ -81,7 +81,7 @@ def test_scores_equal_lensopt_simulate_on_the_same_tile(tmp_path: Path) -> None:
         exr = tmp_path / f"scene{k}.exr"  # float EXR: read back linear, bit for bit
         write_image(exr, src.scene(k, 64, 64).permute(1, 2, 0).numpy(), ImageInfo(64, 64, 3, 32, True, "linear", "exr"))
         r = runner.invoke(app, ["simulate", str(CMOUNT), str(exr), "-o", str(tmp_path / f"o{k}.exr"), "--region",
-                                item.tile, "--rays", "rings:8", "--json"])
+                                item.tile, "--rays", "rings:8", "--json", "--score"])
         assert r.exit_code == 0, r.output
         m = json.loads(r.stdout)["metrics"]
         assert m["psnr_db"] == pytest.approx(item.psnr_db, abs=1e-9)
