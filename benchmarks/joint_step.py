@@ -95,6 +95,8 @@ def main() -> None:
         out = fn()
         times.setdefault(name, []).append(time.perf_counter() - t0)
         cpu.setdefault(name, []).append(time.process_time() - c0)
+        print(f"{name}: wall {times[name][-1]:.2f} s, CPU {cpu[name][-1]:.2f} s, peak RSS {peak_rss_mb():.0f} MB",
+              flush=True)  # as it goes: a large run may be stopped before the end
         return out
 
     whole = []

@@ -104,8 +104,9 @@ def plain_line(p: Progress) -> str:
     lam = "—" if p.damping != p.damping else f"{p.damping:.2e}"
     esr = "—" if not math.isfinite(p.esr_um) else f"{p.esr_um:.3f} µm"
     rays = "—" if not math.isfinite(p.valid_fraction) else f"{100 * p.valid_fraction:.1f} %"
-    return (f"step {p.step}/{p.steps} [{p.phase}] merit {p.merit:.6e}, ESR {esr}, λ {lam}, accepted {p.accepted}, "
-            f"rejected {p.rejected}, rays ok {rays}, {p.elapsed_s:.0f} s")
+    image = f", image loss {p.image_loss:.4e}, PSNR {p.psnr_db:.2f} dB" if math.isfinite(p.image_loss) else ""
+    return (f"step {p.step}/{p.steps} [{p.phase}] merit {p.merit:.6e}{image}, ESR {esr}, λ {lam}, "
+            f"accepted {p.accepted}, rejected {p.rejected}, rays ok {rays}, {p.elapsed_s:.0f} s")
 
 
 def summary(result: OptimizeResult, start: dict[str, Any], final: dict[str, Any],

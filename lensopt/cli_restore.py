@@ -50,9 +50,12 @@ def stop_on_signals() -> Iterator[list[bool]]:
     flag = [False]
     old = {}
 
+    from lensopt.cli_common import state
+
     def handler(signum: int, frame: Any) -> None:
         if flag[0] and signum == signal.SIGINT:
             raise KeyboardInterrupt
+        state.signal_exit = 143 if signum == signal.SIGTERM else 130
         flag[0] = True
 
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -115,6 +118,8 @@ def register(app: typer.Typer) -> None:
         """Train the restoration network for a fixed lens (S4.3.2): Adam on MAE, cosine schedule."""
         import dataclasses
 
+        import torch
+
         from lensopt.optim.irm import imaging_setup
         from lensopt.optim.irm_run import train_irm
         from lensopt.restore.config import configs_from_spec
@@ -141,19 +146,36 @@ def register(app: typer.Typer) -> None:
                 line += f"  | held-out PSNR raw {rec['psnr_raw']:.2f} dB → restored {rec['psnr_restored']:.2f} dB"
             err_console.print(line, highlight=False)
 
-        with stop_on_signals() as flag:
-            res = train_irm(model.spec, dump_json(model.spec), (model.lens, model.system), setup, net, cfg, source,
-                            val_source, steps=n_steps, data=data, output=output, resume=resume, device=dev,
-                            log_dir=log_dir, stop=lambda: flag[0], on_progress=show)
+        dist = init_distributed(dev)
+        if dev.type == "cuda" and dist.active:
+            dev = torch.device(dist.device)
+            torch.cuda.set_device(dev)
+        try:
+            check_same_settings(dist, {"spec": model.spec.model_dump(mode="json"), "cfg": repr(cfg), "steps": n_steps,
+                                       "data": data, "resume": resume, "output": str(output)})
+            with stop_on_signals() as flag:
+                res = train_irm(model.spec, dump_json(model.spec), (model.lens, model.system), setup, net, cfg,
+                                source, val_source, steps=n_steps, data=data, output=output, resume=resume,
+                                device=dev, log_dir=log_dir, stop=lambda: dist.any(flag[0]),
+                                on_progress=show if dist.rank == 0 else None, dist=dist)
+        finally:
+            if dist.active:
+                import torch.distributed as tdist
+
+                tdist.destroy_process_group()
+        if dist.rank != 0:
+            if res.interrupted:
+                raise typer.Exit(_stopped())
+            return
         summary = {"checkpoint": res.checkpoint, "steps": res.steps, "interrupted": res.interrupted,
-                   "validation": res.validation, "device": str(dev)}
+                   "validation": res.validation, "device": str(dev), "processes": dist.world}
         if as_json:
             console.print_json(json.dumps(summary))
         else:
             msg = f"wrote {res.checkpoint} (step {res.steps}{', interrupted' if res.interrupted else ''})"
             console.print(msg, highlight=False)
         if res.interrupted:
-            raise typer.Exit(130)
+            raise typer.Exit(_stopped())
 
     @app.command("restore")
     @handle_errors
@@ -262,7 +284,7 @@ def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed:
 
         with stop_on_signals() as flag:
             res = run_joint(start_spec, steps=steps, seed=seed, checkpoint=checkpoint, resume=resume, device=dev,
-                            log_dir=log_dir, dist=dist, stop=lambda: flag[0], on_progress=show)
+                            log_dir=log_dir, dist=dist, stop=lambda: dist.any(flag[0]), on_progress=show)
         if dist.rank == 0:
             save_json(res.spec, output)
             summary = {"output": str(output), "checkpoint": str(checkpoint) if checkpoint else None,
@@ -285,7 +307,7 @@ def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed:
 
             tdist.destroy_process_group()
     if res.interrupted:
-        raise typer.Exit(130)
+        raise typer.Exit(_stopped())
 
 
 def irm_hook(model: Any, checkpoint: Path) -> Any:
@@ -307,3 +329,11 @@ def irm_hook(model: Any, checkpoint: Path) -> Any:
                              tile=int(im.get("patch", 256)))[None]
 
     return hook
+
+
+def _stopped() -> int:
+    """Exit code of a run stopped by a signal at a step boundary (130 Ctrl-C, 143 SIGTERM), its line printed."""
+    from lensopt.cli_common import report_signal, state
+
+    word = "terminated" if state.signal_exit == 143 else "interrupted"
+    return report_signal(f"{word}: stopped at a step boundary, checkpoint written")

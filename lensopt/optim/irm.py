@@ -224,8 +224,11 @@ def validation_set(source: Source, setup: ImagingSetup, count: int, *, seed: int
 
 
 def validate(model: nn.Module, grids_of: Callable[[Tensor], Tensor], val: ValidationSet, setup: ImagingSetup, *,
-             chunk: int = 8) -> dict[str, float]:
-    """Mean PSNR (dB) and MAE of the captures and of their restorations on the validation set."""
+             chunk: int = 8, examples: dict[str, Tensor] | None = None) -> dict[str, float]:
+    """Mean PSNR (dB) and MAE of the captures and of their restorations on the validation set.
+
+    ``examples`` (a dict) receives the first chunk's scenes, captures, restorations and conditioning
+    PSFs (for TensorBoard images)."""
     raw, rest, mae = [], [], []
     device = next(model.parameters()).device
     with torch.no_grad():
@@ -234,7 +237,10 @@ def validate(model: nn.Module, grids_of: Callable[[Tensor], Tensor], val: Valida
             scenes = val.scenes[sl].to(device)
             grids = grids_of(val.tiles[sl]).to(device)
             cap = capture(scenes, grids, setup.settings, val.noise[sl].to(device))
-            out = model(cap, mean_patch_psf(grids.flatten(1, 2)).to(cap.dtype))
+            kpsf = mean_patch_psf(grids.flatten(1, 2)).to(cap.dtype)
+            out = model(cap, kpsf)
+            if examples is not None and i == 0:
+                examples.update(scene=scenes, capture=cap, restored=out, psf=kpsf)
             raw.append(psnr_db(scenes, cap))
             rest.append(psnr_db(scenes, out))
             mae.append((out - scenes).abs().flatten(1).mean(1))
@@ -255,12 +261,18 @@ def train_network(
     checkpoint: Callable[[NetworkRun], None] | None = None,
     on_progress: Callable[[dict[str, Any]], None] | None = None,
     stop: Callable[[], bool] = lambda: False,
-    grad_sync: Callable[[nn.Module], None] | None = None,
+    on_validate: Callable[[int, dict[str, Tensor]], None] | None = None,
+    share: slice | None = None,
+    mean: Callable[[Tensor], Tensor] | None = None,
 ) -> bool:
     """Continue ``run`` up to ``steps`` steps; returns True if stopped early by ``stop()``.
 
-    ``grad_sync`` (DDP) averages the gradients across ranks; without it the model's own ``forward``
-    and ``backward`` are used as they are (a ``DistributedDataParallel`` wrapper does it itself).
+    ``on_validate(step, examples)`` receives the first validation patches (scene, capture, restored,
+    psf) at each validation.
+
+    Data parallel (``torch.distributed``): every rank draws the same combined batch from the same
+    generators and trains on its ``share`` of it; ``run.model`` is then a ``DistributedDataParallel``
+    module (gradients averaged) and ``mean`` averages the reported loss over ranks.
     """
     device = next(run.model.parameters()).device
     with torch.no_grad():
@@ -273,15 +285,22 @@ def train_network(
             break
         t0 = time.perf_counter()
         scenes, tiles, noise = draw_batch(source, setup, cfg.batch, run.generators, device=device)
+        if share is not None:
+            scenes, tiles, noise = scenes[share], tiles[share], noise[share]
         grids = grids_of(tiles).to(device)
         cap = capture(scenes, grids, setup.settings, noise)
         kpsf = mean_patch_psf(grids.flatten(1, 2)).to(cap.dtype)
         lr = cosine_lr(run.step, steps, cfg.lr, cfg.lr_min)
         loss = network_step(run.model, run.optimizer, cap, kpsf, scenes, lr)
+        if mean is not None:
+            loss = float(mean(torch.tensor(loss, dtype=torch.float64)))
         run.step += 1
         rec: dict[str, Any] = {"step": run.step, "loss": loss, "lr": lr, "wall_s": time.perf_counter() - t0}
         if val is not None and cfg.validate_every and (run.step % cfg.validate_every == 0 or run.step == steps):
-            rec.update(validate(run.model, grids_of, val, setup))
+            ex: dict[str, Tensor] = {}
+            rec.update(validate(run.model, grids_of, val, setup, examples=ex))
+            if on_validate is not None:
+                on_validate(run.step, ex)
         run.history.append(rec)
         if on_progress is not None:
             on_progress(rec)
@@ -320,3 +339,20 @@ def load_run_state(run: NetworkRun, network: dict[str, Tensor], state: dict[str,
         raise CheckpointError(f"does not fit this network: {str(err).splitlines()[0]}", path="--resume") from None
     run.step = step
     run.history = list(info.get("history", []))
+
+
+def log_examples(writer: Any, tag: str, step: int, ex: dict[str, Tensor], count: int = 4) -> None:
+    """TensorBoard images: scene | capture | restored side by side per patch, and the conditioning PSFs
+    (each scaled to its maximum)."""
+    if not ex:
+        return
+    n = min(count, ex["scene"].shape[0])
+    rows = torch.cat([ex["scene"][:n], ex["capture"][:n], ex["restored"][:n]], dim=-1).clamp(0, 1)
+    if rows.shape[1] == 1:
+        rows = rows.expand(-1, 3, -1, -1)
+    writer.add_images(f"{tag}/scene_capture_restored", (rows ** (1 / 2.2)).cpu(), step)  # ~sRGB for display
+    k = ex["psf"][:n]
+    k = k / k.amax((-2, -1), keepdim=True).clamp_min(1e-12)
+    if k.shape[1] == 1:
+        k = k.expand(-1, 3, -1, -1)
+    writer.add_images(f"{tag}/conditioning_psf", k.cpu(), step)

@@ -14,6 +14,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
+from lensopt.errors import LensoptError
 from lensopt.io.checkpoint import (
     Checkpoint,
     CheckpointError,
@@ -28,6 +29,7 @@ from lensopt.optim.irm import (
     Source,
     lens_psfs,
     load_run_state,
+    log_examples,
     region_grids,
     run_state,
     train_network,
@@ -81,8 +83,17 @@ def train_irm(
     log_dir: Path | None = None,
     stop: Callable[[], bool] = lambda: False,
     on_progress: Callable[[dict[str, Any]], None] | None = None,
+    dist: Any = None,
 ) -> IrmResult:
-    """Train a fresh network (or continue the checkpoint at ``output`` with ``resume``) on a fixed lens."""
+    """Train a fresh network (or continue the checkpoint at ``output`` with ``resume``) on a fixed lens.
+
+    ``dist`` (``optim.joint.Dist``): data parallel over torch.distributed ranks (rank 0 writes)."""
+    from lensopt.optim.joint import Dist
+
+    dist = dist or Dist()
+    if cfg.batch % dist.world:
+        raise LensoptError(f"must be divisible by the number of processes ({dist.world})", path="--batch",
+                           got=cfg.batch)
     lens, system = lens_system
     fp = network_fingerprint(spec, net)
     settings = _settings(setup, cfg, data)
@@ -102,17 +113,24 @@ def train_irm(
             raise CheckpointError(f"was written with other settings ({', '.join(diff)}); resume with the same ones",
                                   path="--resume", got=str(output))
         load_run_state(run, ck.network, ck.state, ck.meta, ck.step)
-    elif output.exists():
+    elif output.exists() and dist.rank == 0:
         raise CheckpointError("exists; pass --resume to continue it or choose another -o", path="--output",
                               got=str(output))
 
     writer = None
-    if log_dir is not None:
+    if log_dir is not None and dist.rank == 0:
         from torch.utils.tensorboard import SummaryWriter
 
         writer = SummaryWriter(str(log_dir))
 
+    if dist.active:
+        from torch.nn.parallel import DistributedDataParallel
+
+        run.model = DistributedDataParallel(model)
+
     def checkpoint(r: NetworkRun) -> None:
+        if dist.rank != 0:
+            return
         network, state, info = run_state(r)
         info["settings"] = settings
         info["network_config"] = net.to_dict()
@@ -130,7 +148,11 @@ def train_irm(
     val = validation_set(val_source, setup, cfg.validation_patches, seed=cfg.seed + 7919)
     try:
         interrupted = train_network(run, lens, system, setup, source, cfg, steps=steps, val=val,
-                                    checkpoint=checkpoint, on_progress=progress, stop=stop)
+                                    checkpoint=checkpoint, on_progress=progress, stop=stop,
+                                    on_validate=None if writer is None else
+                                    (lambda step, ex: log_examples(writer, "train-irm", step, ex)),
+                                    share=dist.share(cfg.batch) if dist.active else None,
+                                    mean=dist.mean if dist.active else None)
     finally:
         if writer is not None:
             writer.close()

@@ -71,6 +71,17 @@ class Dist:
         dist.all_reduce(t)
         return (t / self.world).to(src)
 
+    def any(self, flag: bool) -> bool:
+        """True on every rank if ``flag`` is true on any (a stop request must be seen by all ranks at the
+        same step boundary, or the others would wait in the next collective)."""
+        if not self.active:
+            return flag
+        import torch.distributed as dist
+
+        t = torch.tensor([int(flag)], device=self.device)
+        dist.all_reduce(t, op=dist.ReduceOp.MAX)
+        return bool(t.item())
+
     def broadcast(self, t: Tensor) -> Tensor:
         if not self.active:
             return t
@@ -217,7 +228,7 @@ def _db(mse: float) -> float:
 
 
 def evaluate_pair(obj: RestoredObjective, lens: Any, net: nn.Module, count: int, *, chunk: int = 4,
-                  with_ssim: bool = False) -> dict[str, float]:
+                  with_ssim: bool = False, examples: dict[str, Tensor] | None = None) -> dict[str, float]:
     """Held-out patches (``obj``'s held-out source and pseudo-random tiles, fixed noise): mean PSNR
     (and SSIM) of the captures and of their restorations."""
     images, regions = obj.batch(-1, held_out=True, size=count)
@@ -231,6 +242,8 @@ def evaluate_pair(obj: RestoredObjective, lens: Any, net: nn.Module, count: int,
             obj.noise_seed, obj.noise_offset = _seed("noise", obj.spec.seed, "held-out"), i
             cap, k = obj.capture(spots.xy, spots, airy, images[i:i + chunk], regions[i:i + chunk])
             out = net(cap, k.to(cap.dtype))
+            if examples is not None and i == 0:
+                examples.update(scene=images[:chunk], capture=cap, restored=out, psf=k)
             raw.append(psnr_db(images[i:i + chunk], cap))
             rest.append(psnr_db(images[i:i + chunk], out))
             if with_ssim:

@@ -25,7 +25,7 @@ from lensopt.io.checkpoint import (
     save_checkpoint,
     unflatten_optimizer,
 )
-from lensopt.optim.irm import make_optimizer
+from lensopt.optim.irm import log_examples, make_optimizer
 from lensopt.optim.joint import Dist, RestoredObjective, evaluate_pair, joint_step
 from lensopt.optim.lm import LevenbergMarquardt, Trial
 from lensopt.optim.problem import Problem
@@ -187,7 +187,10 @@ def run_joint(
             step += 1
             rec["esr_um"] = 1e3 * problem.spot_esr_mm(lm.theta)
             if val_every and (step % val_every == 0 or step == total):
-                rec.update(evaluate_pair(obj, problem.lens(lm.theta)[0], net, count))
+                ex: dict[str, torch.Tensor] = {}
+                rec.update(evaluate_pair(obj, problem.lens(lm.theta)[0], net, count, examples=ex))
+                if writer is not None:
+                    log_examples(writer, "joint", step, ex)
             history.append(rec)
             if writer is not None:
                 for k, v in rec.items():

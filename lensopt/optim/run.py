@@ -205,6 +205,8 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
             event = ""
             flat = problem.schedules_settled(frac)
             reason = state.stop_reason()
+            if reason and problem.image is not None and not reason.startswith("damping"):
+                reason = None  # each step's merit is on another batch: a stalled merit means nothing
             if reason and (flat or reason.startswith("damping")):
                 if bind_step is not None and not result.bound:
                     bind_step = k

@@ -74,9 +74,9 @@ def test_imported_lens_traces_like_the_original(path: Path) -> None:
     imported = import_codev(export_codev(spec)).spec
     _assert_same_trace(spec, imported)
     # With lensopt's comments the import restores the spec itself (catalog names, model glasses,
-    # exact phase coefficients and relative fields, f-number apertures); an [optimize] section is a
-    # lensopt run setting, not part of the lens, and does not travel.
-    assert dump_json(imported) == dump_json(spec.model_copy(update={"optimize": None}))
+    # exact phase coefficients and relative fields, f-number apertures); [optimize] and [restore] are
+    # lensopt run settings, not part of the lens, and do not travel.
+    assert dump_json(imported) == dump_json(spec.model_copy(update={"optimize": None, "restore": None}))
 
 
 @pytest.mark.parametrize("path", LENSES, ids=IDS)

@@ -64,3 +64,26 @@ def test_bad_raw_input_is_one_line_naming_the_field(tmp_path: Path, make_cooke, 
     lines = [ln for ln in r.output.strip().splitlines() if ln.strip()]
     assert len(lines) == 1 and field in lines[0], r.output
     assert not out.exists()
+
+
+@pytest.mark.parametrize("size", [16, 64])
+def test_an_image_folder_trains_and_small_images_are_refused(tmp_path: Path, make_cooke, size: int) -> None:  # noqa: ANN001
+    import numpy as np
+
+    from lensopt.imaging.io import ImageInfo, write_image
+
+    folder = tmp_path / "images"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    for k in range(12):  # hash split: some of them held out
+        write_image(folder / f"img{k:02d}.png", rng.random((size, size, 3), dtype=np.float32),
+                    ImageInfo(size, size, 3, 8, False, "sRGB", "png"))
+    start = _write(tmp_path, _raw(make_cooke, images=str(folder)))
+    out = tmp_path / "lens.json"
+    r = runner.invoke(app, ["optimize", str(start), "-o", str(out), "--steps", "1", "--json", "-q"])
+    if size < SMALL["patch"]:
+        assert r.exit_code == 2 and "optimize.image.images" in r.output, r.output
+        assert not out.exists()
+    else:
+        assert r.exit_code == 0, r.output
+        assert json.loads(r.stdout)["steps"] == 1

@@ -55,3 +55,22 @@ def test_ranks_with_different_settings_stop_with_one_line_errors() -> None:
     assert r.returncode != 0
     lines = [ln for ln in r.stdout.splitlines() if ln.startswith("rank")]
     assert len(lines) == 2 and all("different settings" in ln for ln in lines), r.stdout + r.stderr[-2000:]
+
+
+@pytest.mark.slow
+def test_train_irm_two_gloo_ranks_equal_one_process(tiny_lens: Path, tmp_path: Path) -> None:
+    base = ["-m", "lensopt", "train-irm", str(tiny_lens), "--steps", "2", "--batch", "2", "--fields", "3",
+            "--psf-size", "9", "--sampling", "rings:4", "--json"]
+    one = subprocess.run([sys.executable, *base, "-o", str(tmp_path / "ck1")], env=_env(), capture_output=True,
+                         text=True, timeout=600)
+    assert one.returncode == 0, one.stderr
+    two = subprocess.run([*TORCHRUN, *base, "-o", str(tmp_path / "ck2")], env=_env(), capture_output=True, text=True,
+                         timeout=600)
+    assert two.returncode == 0, two.stderr[-3000:]
+    a, b = load_checkpoint(tmp_path / "ck1"), load_checkpoint(tmp_path / "ck2")
+    assert a.step == b.step == 2
+    moved = 0
+    for k in a.network:
+        torch.testing.assert_close(a.network[k], b.network[k], rtol=1e-4, atol=1e-6)
+        moved += int(not torch.equal(a.network[k], torch.zeros_like(a.network[k])))
+    assert moved > 0

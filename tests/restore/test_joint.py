@@ -98,9 +98,9 @@ def test_resume_of_a_joint_run_is_bit_identical(tmp_path: Path) -> None:
     assert [h["mae"] for h in full.history] == [h["mae"] for h in rest.history]
 
 
-def test_joint_steps_move_both_lens_and_network() -> None:
+def test_joint_steps_move_both_lens_and_network(tmp_path: Path) -> None:
     spec = parse_spec(joint_data(steps=2))
-    res = run_joint(spec, steps=2, evaluate=True)
+    res = run_joint(spec, steps=2, evaluate=True, log_dir=tmp_path / "tb", validate_every=2)
     assert res.start is not None and res.final is not None
     # identity network at the start: restored = raw exactly
     assert res.start["psnr_restored"] == res.start["psnr_raw"]
@@ -109,6 +109,13 @@ def test_joint_steps_move_both_lens_and_network() -> None:
     r1 = [s.radius for s in res.spec.surfaces[:3]]
     assert r0[0] != r1[0] and r0[2] != r1[2] and r0[1] == r1[1]
     assert all(h["accepted"] in (True, False) and h["mae"] > 0 for h in res.history)
+    assert "psnr_restored" in res.history[-1]
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    acc = EventAccumulator(str(tmp_path / "tb"))
+    acc.Reload()
+    assert {"joint/psnr_restored", "joint/mae", "joint/esr_um"} <= set(acc.Tags()["scalars"])
+    assert "joint/scene_capture_restored" in acc.Tags()["images"]
 
 
 def test_cli_optimize_restored_and_errors(tmp_path: Path) -> None:
