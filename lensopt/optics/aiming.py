@@ -117,6 +117,9 @@ class PupilAim:
         converged: (F, W) bool, every residual below ``tol_mm`` and every ray traced.
         steps: Newton steps taken (S21–S22 updates).
         tol_mm: () the convergence tolerance used for ``converged``, mm.
+        held: (F, W, 2) bool where the inferior / superior ray is held on the edge of the front aperture
+            (``aperture`` given and the aimed ray would fall outside it), else None. A held ray counts
+            as converged when it reaches the stop inside its edge; its residual is then reported as 0.
     """
 
     factors: Tensor
@@ -127,6 +130,7 @@ class PupilAim:
     converged: Tensor
     steps: int
     tol_mm: Tensor
+    held: Tensor | None = None
 
 
 def stop_radius(lens: Lens, system: System, *, epd: Tensor, entrance_pupil_z: Tensor) -> Tensor:
@@ -151,6 +155,7 @@ def aim_full(
     steps: int = 1,
     chief: ChiefAim | None = None,
     tol_mm: float | None = None,
+    aperture: tuple[Tensor, Tensor] | None = None,
 ) -> PupilAim:
     """Full ray aiming (S1.3.2, S21–S22): pupil factors that put the marginal rays on the stop edge.
 
@@ -168,6 +173,13 @@ def aim_full(
         steps: Newton steps (1 by default, as in the seed; more for strong pupil aberration).
         chief: a chief-ray aiming already computed for these fields, else it is computed here.
         tol_mm: tolerance of ``converged``, default 1e3·eps·(1 + EPD) mm.
+        aperture: (centre, radius), broadcastable to (F, W): a front aperture's opening in relative
+            pupil coordinates (``vignetting.front_aperture_disc``). Then the vignetting it causes comes
+            first (S1.3.2, last paragraph): the meridional rays start inside the opening, y ∈ [c − ρ,
+            c + ρ], and every step is projected back into it, so a marginal ray the aperture cuts is
+            held on its edge (the bottom, on a vignetting telephoto) while the others (top, sagittal)
+            are aimed at the stop edge; the lateral ray starts on the opening's chord. Without it the
+            unvignetted pupil is aimed, whose cut-off rays may miss the front elements altogether.
 
     Returns:
         A ``PupilAim`` with the factors, residuals on the stop and convergence flags.
@@ -204,6 +216,15 @@ def aim_full(
 
     y_c = chief.offset.detach()
     u = torch.stack([y_c - 1.0, y_c + 1.0, torch.ones_like(y_c)], -1)
+    lo_b = hi_b = None
+    if aperture is not None:
+        centre, rho = (torch.broadcast_to(t.to(lens.dtype), y_c.shape) for t in aperture)
+        lo_b, hi_b = centre - rho, centre + rho  # attached: the held rays' pupil heights are differentiable
+        lo_d, hi_d, c_d, rho_d = lo_b.detach(), hi_b.detach(), centre.detach(), rho.detach()
+        u = _into_opening(u, lo_d, hi_d)
+        mid = 0.5 * (u[..., 0] + u[..., 1])
+        chord = torch.sqrt((rho_d**2 - (mid - c_d) ** 2).clamp_min(0.0))
+        u = torch.stack([u[..., 0], u[..., 1], torch.minimum(u[..., 2], chord.clamp_min(1e-3))], -1)
     u_good = u.clone()
     for _ in range(steps - 1):
         res, slope, ok = newton(u, det_args, r_det)
@@ -212,6 +233,8 @@ def aim_full(
         u_good = torch.where(ok, u, u_good)
         # Where the ray failed, fall back half-way to the last point that traced.
         u = torch.where(good_slope, u - step, torch.where(ok, u, 0.5 * (u + u_good)))
+        if lo_b is not None:
+            u = _into_opening(u, lo_d, hi_d)
     # Final step on the attached lens: meridional rays first, then the lateral ray launched at the
     # attached y0, so that its derivative includes the coupling (exact at convergence).
     res_d, slope, ok = newton(u, det_args, r_det)
@@ -222,6 +245,10 @@ def aim_full(
                            torch.where(ok, u, u_good))
     g_att, _ = stop_hits(u, 0.5 * (u[..., 0] + u[..., 1]), att_args)
     new = torch.where(full_step, u - (g_att - sign * radius) / safe_slope, fallback)
+    held = None
+    if lo_b is not None:
+        held = torch.stack([new[..., 0].detach() <= lo_d, new[..., 1].detach() >= hi_d], -1)
+        new = _into_opening(new, lo_b, hi_b)
     g_lat, _ = stop_hits(u, 0.5 * (new[..., 0] + new[..., 1]), att_args)
     lat = torch.where(full_step[..., 2], u[..., 2] - (g_lat[..., 2] - radius) / safe_slope[..., 2], new[..., 2])
     final = torch.stack([new[..., 0], new[..., 1], lat], -1)
@@ -231,6 +258,11 @@ def aim_full(
         fin = final.detach()
         g_fin, valid_fin = stop_hits(fin, 0.5 * (fin[..., 0] + fin[..., 1]), det_args)
         res_fin = torch.where(valid_fin, g_fin - sign * r_det, torch.zeros_like(g_fin))
+        if held is not None:  # a held ray that meets the stop inside its edge is where it should be
+            eps_ = 1e3 * torch.finfo(lens.dtype).eps * (1.0 + epd.detach())
+            inside = held & (sign[:2] * res_fin[..., :2] <= eps_)
+            res_fin = torch.cat([torch.where(inside, torch.zeros_like(inside, dtype=res_fin.dtype),
+                                             res_fin[..., :2]), res_fin[..., 2:]], -1)
         pupil = torch.stack([torch.zeros_like(y_c), chief.offset.detach()], -1).unsqueeze(-2)
         hit = trace(detached, launch(detached, system, pupil, det_args[1], epd=det_args[2],
                                      entrance_pupil_z=det_args[3]), upto=lens.stop)
@@ -251,4 +283,9 @@ def aim_full(
     circle = torch.stack([offset, -offset, torch.zeros_like(offset)], -1)
     factors = torch.where(lost, circle, factors)
     return PupilAim(factors=factors, chief=chief, stop_radius_mm=radius, residual_mm=residual, traced=traced,
-                    converged=converged, steps=steps, tol_mm=tol)
+                    converged=converged, steps=steps, tol_mm=tol, held=held)
+
+
+def _into_opening(u: Tensor, lo: Tensor, hi: Tensor) -> Tensor:
+    """(F, W, 3) pupil unknowns with the inferior and superior heights moved into [lo, hi]."""
+    return torch.stack([torch.maximum(u[..., 0], lo), torch.minimum(u[..., 1], hi), u[..., 2]], -1)

@@ -8,8 +8,10 @@ The launched pupil of each field and wavelength is an ellipse in relative entran
 (S19–S20), built in three layers: the aimed pupil (``none``: the paraxial unit disc; ``chief``: the
 disc shifted so that the chief ray meets the stop centre; ``full``: the ellipse whose marginal rays
 meet the stop edge, S21–S22), then fixed factors taken relative to it (``system.vignetting``, as CODE V
-applies VUY/VLY/VUX with ray aiming), then the front aperture's cut (S1.3.2, S4.1.5). Rays that fall
-outside the front aperture anyway are marked ``Status.BLOCKED``.
+applies VUY/VLY/VUX with ray aiming), then the front aperture's cut (S1.3.2, S4.1.5). With ``full``
+behind a front aperture the cut comes first (S1.3.2, last paragraph): ``aim_full`` aims only rays
+through the opening, holding a marginal ray the aperture cuts on its edge. Rays that fall outside the
+front aperture anyway are marked ``Status.BLOCKED``.
 """
 
 from __future__ import annotations
@@ -81,18 +83,21 @@ def pupil_shape(
         chief = aim_chief(lens, system, tan_field, **opts)
         zero = torch.zeros_like(chief.offset)
         factors = ellipse_to_factors(chief.offset, 1.0 + zero, 1.0 + zero)
+    fa = system.front_aperture
+    if fa is not None:
+        centre, radius = front_aperture_disc(fa.distance, fa.diameter, tan_field,
+                                             object_distance=system.object_distance, **opts)
     if aim == "full":
-        full = aim_full(lens, system, tan_field, steps=aim_steps, chief=chief, **opts)
+        # Behind a front aperture the vignetting comes first: only rays through the opening are aimed.
+        opening = None if fa is None else (centre[:, None], radius)
+        full = aim_full(lens, system, tan_field, steps=aim_steps, chief=chief, aperture=opening, **opts)
         factors = full.factors
     if vignetting is not None:
         vignetting = vignetting.to(lens.dtype).expand(num_f, num_w, 3)
         factors = vignetting if factors is None else compose_factors(factors, vignetting)
-    fa = system.front_aperture
     if fa is not None:
         if factors is None:
             factors = torch.zeros(num_f, num_w, 3, dtype=lens.dtype, device=lens.device)
-        centre, radius = front_aperture_disc(fa.distance, fa.diameter, tan_field,
-                                             object_distance=system.object_distance, **opts)
         ellipse, blocked = clip_ellipse_to_disc(factors_to_ellipse(factors), centre[:, None], radius,
                                                 lateral=fa.lateral)
         factors = ellipse_to_factors(*ellipse)
