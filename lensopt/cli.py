@@ -5,69 +5,84 @@ Every ``LensoptError`` becomes one line on stderr and exit code 2 (DESIGN.md rul
 
 from __future__ import annotations
 
-import functools
-import json
 import logging
 import math
 import sys
-from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
-from rich.console import Console
-from rich.logging import RichHandler
-from rich.markup import escape
-from rich.table import Table
 
+from lensopt import __version__
+from lensopt.cli_backend import BackendOpt, with_backend
+from lensopt.cli_common import (  # noqa: F401  (re-exported: commands of other modules import them from here)
+    AimOpt,
+    AimStepsOpt,
+    JsonOpt,
+    LensArg,
+    LensoptGroup,
+    LowerLevelFormatter,
+    SamplingOpt,
+    SeedOpt,
+    check_output,
+    console,
+    err_console,
+    handle_errors,
+    print_json,
+    report_signal,
+    signals_deferred,
+    state,
+)
 from lensopt.errors import LensoptError
-from lensopt.optics.sampling import PupilSampling
-from lensopt.spec import Model, build, load_spec
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+if TYPE_CHECKING:
+    from rich.table import Table
+
+    from lensopt.spec import Model
+
+app = typer.Typer(cls=LensoptGroup, add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  rich_markup_mode=None,
                   help="Differentiable lens design: trace, plot, optimize, simulate, export.")
-plot_app = typer.Typer(no_args_is_help=True, help="Figures: layout, ray fans, spot diagrams, PSFs.")
+plot_app = typer.Typer(no_args_is_help=True, help="Figures: layout, fans, spots, PSFs, field curves.")
 app.add_typer(plot_app, name="plot")
 
-# Wide enough for the tables when stdout is a pipe or a file (rich would assume 80 columns).
-console = Console(width=None if sys.stdout.isatty() else 160)
-err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 1000)
-F = TypeVar("F", bound=Callable[..., Any])
 
-LensArg = Annotated[Path, typer.Argument(help="Lens spec (.toml) or resolved lens (.json).")]
-SamplingOpt = Annotated[str, typer.Option("--sampling", help="Pupil sampling: rings:N[:nojitter] or grid:N.")]
-AimOpt = Annotated[str | None, typer.Option("--aim", help="Ray aiming: none | chief | full (default: the spec's).")]
-AimStepsOpt = Annotated[int | None, typer.Option("--aim-steps",
-                                                 help="Newton steps of full aiming (default: the spec's).")]
-SeedOpt = Annotated[int, typer.Option("--seed", help="Seed of every random draw (pupil jitter).")]
-JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object instead of tables.")]
-
-
-def handle_errors(fn: F) -> F:
-    """Turn lensopt errors into one line and exit code 2; Ctrl-C into exit code 130."""
-
-    @functools.wraps(fn)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return fn(*args, **kwargs)
-        except LensoptError as err:
-            err_console.print(f"[bold red]error:[/] {escape(str(err))}", markup=True, highlight=False, soft_wrap=True)
-            raise typer.Exit(2) from None
-        except KeyboardInterrupt:
-            err_console.print("interrupted")
-            raise typer.Exit(130) from None
-
-    return wrapper  # type: ignore[return-value]
+def _version(value: bool) -> None:
+    if value:
+        sys.stdout.write(f"lensopt {__version__}\n")
+        raise typer.Exit(0)
 
 
 @app.callback()
-def main(verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Debug logging.")] = False) -> None:
-    logging.basicConfig(level=logging.DEBUG if verbose else logging.WARNING, format="%(message)s",
-                        handlers=[RichHandler(console=err_console, show_path=False)])
+def main(verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Debug logging; tracebacks of bugs.")] = False,
+         max_memory: Annotated[str | None, typer.Option(
+             "--max-memory", help="Memory budget, e.g. 4G (default: half the machine's memory).")] = None,
+         version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True,
+                                               help="Print the version and exit.")] = False) -> None:
+    from lensopt import resources
+
+    state.verbose = verbose
+    resources.set_budget(None)
+    if max_memory is not None:
+        try:
+            resources.set_budget(resources.parse_size(max_memory))
+        except LensoptError as err:
+            raise typer.BadParameter(err.message + f" (got {max_memory!r})", param_hint="'--max-memory'") from None
+    handler = logging.StreamHandler(sys.stderr)  # one plain line per message: "warning: ..."
+    handler.setFormatter(LowerLevelFormatter("%(levelname)s: %(message)s"))
+    logging.basicConfig(level=logging.DEBUG if verbose else logging.WARNING, handlers=[handler], force=True)
 
 
 def load_model(path: Path) -> Model:
+    from lensopt.spec import build, load_spec
+
     return build(load_spec(path))
+
+
+def parse_sampling(text: str, seed: int, option: str = "--sampling"):  # noqa: ANN201
+    from lensopt.optics.sampling import PupilSampling
+
+    return PupilSampling.parse(text, seed=seed, path=option)
 
 
 def check_aim(aim: str | None) -> str | None:
@@ -82,24 +97,34 @@ def check_aim_steps(steps: int | None) -> int | None:
     return steps
 
 
-def print_json(obj: Any) -> None:
-    sys.stdout.write(json.dumps(obj, indent=2, allow_nan=True) + "\n")
+def _table(*args: Any, **kwargs: Any) -> Table:
+    from rich.table import Table
+
+    return Table(*args, **kwargs)
 
 
 # ----------------------------------------------------------------------------------------- trace
 
 
-@app.command()
+@app.command(short_help="First-order data, spot sizes, failures, distortion, illumination.")
 @handle_errors
+@with_backend(err_console)
 def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None, seed: SeedOpt = 0,
-          as_json: JsonOpt = False, aim_steps: AimStepsOpt = None) -> None:
+          as_json: JsonOpt = False, aim_steps: AimStepsOpt = None,
+          mtf: Annotated[str | None, typer.Option("--mtf", help="Also MTF at these cycles/mm (comma-separated; "
+                                                  "in --json as mtf).")] = None,
+          backend: BackendOpt = "auto") -> None:
     """First-order data, RMS spot radius per field and wavelength, ray failures, distortion and
     relative illumination per field."""
     from lensopt.analysis.report import trace_report
 
     model = load_model(lens)
-    report = trace_report(model, PupilSampling.parse(sampling, seed=seed, path="--sampling"),
+    report = trace_report(model, parse_sampling(sampling, seed),
                           aim=check_aim(aim), aim_steps=check_aim_steps(aim_steps))
+    if mtf is not None:
+        from lensopt.cli_tolerance import mtf_report, parse_frequencies
+
+        report["mtf"] = mtf_report(model, parse_frequencies(mtf, "--mtf"))
     if as_json:
         print_json(report)
         return
@@ -112,7 +137,7 @@ def _render_trace(r: dict[str, Any]) -> None:
     console.print(f"[bold]{r['name']}[/]")
     console.print(_prescription_table(r["surfaces"], ref, r["reference_nm"]))
     fo = r["first_order"]
-    t = Table(title=f"first-order data ({r['reference_nm']:g} nm)", title_justify="left")
+    t = _table(title=f"first-order data ({r['reference_nm']:g} nm)", title_justify="left")
     t.add_column("quantity")
     t.add_column("value", justify="right")
     t.add_column("unit")
@@ -125,7 +150,7 @@ def _render_trace(r: dict[str, Any]) -> None:
         t.add_row(label, f"{fo[key]:.6f}", "" if "fnumber" in key else "mm")
     console.print(t)
     wl = r["wavelengths_nm"]
-    s = Table(title=f"RMS spot radius (µm), sampling {r['sampling']}, aim {r['aim']}", title_justify="left")
+    s = _table(title=f"RMS spot radius (µm), sampling {r['sampling']}, aim {r['aim']}", title_justify="left")
     s.add_column("field °", justify="right")
     for w in wl:
         s.add_column(f"{w:g} nm", justify="right")
@@ -134,11 +159,14 @@ def _render_trace(r: dict[str, Any]) -> None:
     s.add_column("chief y mm", justify="right")
     s.add_column("failed", justify="right")
     for f in r["fields"]:
-        s.add_row(f"{f['angle_deg']:.3f}", *[f"{v:.4f}" for v in f["rms_spot_radius_um"]],
-                  f"{f['rms_spot_radius_weighted_um']:.4f}", f"{f['centroid_y_mm']:.6f}",
-                  f"{f['chief_ray_y_mm']:.6f}", f"{f['failed_rays']}/{f['rays']}")
+        s.add_row(f"{f['angle_deg']:.3f}", *[_num(v) for v in f["rms_spot_radius_um"]],
+                  _num(f["rms_spot_radius_weighted_um"]), _num(f["centroid_y_mm"], ".6f"),
+                  _num(f["chief_ray_y_mm"], ".6f"), f"{f['failed_rays']}/{f['rays']}")
     console.print(s)
-    console.print(f"effective spot radius: [bold]{r['effective_spot_radius_um']:.4f} µm[/]")
+    esr = r["effective_spot_radius_um"]
+    console.print(f"effective spot radius: [bold]{esr:.4f} µm[/]" if esr is not None else
+                  "effective spot radius: — (no ray reaches the image at some field or wavelength: see the "
+                  "failures below)")
     failures: dict[str, int] = {}
     for f in r["fields"]:
         for reason, n in f["failures"].items():
@@ -160,7 +188,7 @@ def _render_field(r: dict[str, Any]) -> None:
     from lensopt.analysis.field import AIM_NOTE_FRACTION
 
     full = r["aim"] == "full"
-    t = Table(title=f"Distortion, relative illumination, pupil (V factors at {r['reference_nm']:g} nm)"
+    t = _table(title=f"Distortion, relative illumination, pupil (V factors at {r['reference_nm']:g} nm)"
                     + (f", full aiming {r['aim_steps']} step(s), stop radius {r['stop_radius_mm']:.6f} mm"
                        if full else ""))
     for col in ("field °", "distortion %", "RI S51", "RI S52", "V_i", "V_s", "V_l"):
@@ -184,7 +212,7 @@ def _render_field(r: dict[str, Any]) -> None:
 
 def _prescription_table(surfaces: list[dict[str, Any]], ref: int, ref_nm: float) -> Table:
     """The resolved prescription as traced: one row per surface (the ``surfaces`` of ``trace --json``)."""
-    t = Table(title="prescription (lengths in mm)", title_justify="left")
+    t = _table(title="prescription (lengths in mm)", title_justify="left")
     for col, just in (("surf", "right"), ("type", "left"), ("radius", "right"), ("thickness", "right"),
                       ("material", "left"), (f"n {ref_nm:g} nm", "right"), ("semi-diam.", "right"),
                       ("notes", "left")):
@@ -210,7 +238,7 @@ def _prescription_table(surfaces: list[dict[str, Any]], ref: int, ref_nm: float)
 # ------------------------------------------------------------------------------------------- ray
 
 
-@app.command()
+@app.command(short_help="One real ray, surface by surface (like CODE V's RSI).")
 @handle_errors
 def ray(
     lens: LensArg,
@@ -237,18 +265,19 @@ def ray(
     if as_json:
         print_json(r)
         return
-    t = Table(title=f"real ray: field {field:g}°, pupil ({r['pupil'][0]:g}, {r['pupil'][1]:.6g}), "
+    t = _table(title=f"real ray: field {field:g}°, pupil ({r['pupil'][0]:g}, {r['pupil'][1]:.6g}), "
                     f"{wavelength:g} nm, aim {r['aim']}")
     for col in ("surf", "x", "y", "z", "L", "M", "N", "AOI °", "AOR °"):
         t.add_column(col, justify="right")
     for s in r["surfaces"]:
-        aor = "TIR" if s["aor_deg"] is None else f"{s['aor_deg']:.4f}"
-        t.add_row(str(s["surface"]), *[f"{s[k]:.6f}" for k in ("x", "y", "z", "L", "M", "N")],
-                  f"{s['aoi_deg']:.4f}", aor)
+        aor = "TIR" if s["aor_deg"] is None and s["aoi_deg"] is not None else _num(s["aor_deg"])
+        t.add_row(str(s["surface"]), *[_num(s[k], ".6f") for k in ("x", "y", "z", "L", "M", "N")],
+                  _num(s["aoi_deg"]), aor)
     im = r["image"]
-    t.add_row("image", *[f"{im[k]:.6f}" for k in ("x", "y", "z", "L", "M", "N")], "", "")
+    t.add_row("image", *[_num(im[k], ".6f") for k in ("x", "y", "z", "L", "M", "N")], "", "")
     console.print(t)
-    console.print(f"status: {r['status']}" + (" (backtracking flagged)" if r["backtracking"] else ""))
+    at = f" at surface {r['failed_at_surface']}" if r.get("failed_at_surface") else ""
+    console.print(f"status: {r['status']}{at}" + (" (backtracking flagged)" if r["backtracking"] else ""))
 
 
 # ------------------------------------------------------------------------------------------ plot
@@ -269,14 +298,14 @@ def _titles(model: Model) -> tuple[str, str]:
     return model.spec.name, f"EFL {float(fo.efl):.3f} mm · f/{float(fo.fnumber):.2f} · {field} · {wl} nm"
 
 
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg")
+
+
 def _check_output(path: Path) -> Path:
-    if path.suffix.lower() not in (".png", ".pdf", ".svg", ".jpg", ".jpeg"):
-        raise LensoptError("expected an image file name ending in .png, .pdf, .svg or .jpg",
-                           path="--output", got=str(path))
-    return path
+    return check_output(path, FIGURE_SUFFIXES, what="image file")
 
 
-@plot_app.command("layout")
+@plot_app.command("layout", short_help="2D meridional layout with traced rays.")
 @handle_errors
 def plot_layout_cmd(lens: LensArg, output: OutOpt, aim: AimOpt = None,
                     rays: Annotated[int, typer.Option("--rays", min=2, max=101,
@@ -294,7 +323,7 @@ def plot_layout_cmd(lens: LensArg, output: OutOpt, aim: AimOpt = None,
     err_console.print(f"wrote {output}")
 
 
-@plot_app.command("fans")
+@plot_app.command("fans", short_help="Tangential and sagittal ray fans.")
 @handle_errors
 def plot_fans_cmd(lens: LensArg, output: OutOpt, aim: AimOpt = None,
                   points: Annotated[int, typer.Option("--points", min=3, max=2001,
@@ -315,7 +344,7 @@ def plot_fans_cmd(lens: LensArg, output: OutOpt, aim: AimOpt = None,
     err_console.print(f"wrote {output}")
 
 
-@plot_app.command("spots")
+@plot_app.command("spots", short_help="Spot diagrams per field and wavelength.")
 @handle_errors
 def plot_spots_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings:24", aim: AimOpt = None,
                    seed: SeedOpt = 0, dpi: DpiOpt = 150) -> None:
@@ -327,7 +356,7 @@ def plot_spots_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
 
     out = _check_output(output)
     model = load_model(lens)
-    pupil = PupilSampling.parse(sampling, seed=seed, path="--sampling")
+    pupil = parse_sampling(sampling, seed)
     with torch.no_grad():
         spots = spot_diagram(model.lens, model.system, pupil, aim=check_aim(aim))
     title, sub = _titles(model)
@@ -350,7 +379,9 @@ def export_codev(
 ) -> None:
     """Write the lens as a CODE V sequence file (.seq)."""
     from lensopt.io.codev_export import write_codev
+    from lensopt.spec import load_spec
 
+    check_output(output, (".seq",), what="CODE V sequence file")
     write_codev(load_spec(lens), output, private_catalog=private_catalog)
     err_console.print(f"wrote {output}", highlight=False)
 
@@ -368,6 +399,7 @@ def import_codev(
     if output.suffix.lower() != ".json":
         raise LensoptError("the imported lens is written as JSON; name it *.json", path="--output",
                            got=str(output))
+    check_output(output)
     result = read_codev(seq)
     for warning in result.warnings:
         err_console.print(f"[yellow]warning:[/] {warning}", markup=True, highlight=False, soft_wrap=True)
@@ -377,10 +409,10 @@ def import_codev(
 # -------------------------------------------------------------------------------------- optimize
 
 
-@app.command()
+@app.command(short_help="Optimize a spec (LM or Adam); Ctrl-C or SIGTERM keeps the best lens.")
 @handle_errors
 def optimize(
-    spec: Annotated[Path, typer.Argument(help="Lens spec (.toml or .json) with vary lists and [optimize].")],
+    spec: Annotated[Path, typer.Argument(help="Lens spec (.toml or .json) with vary lists and an optimize section.")],
     output: Annotated[Path, typer.Option("--output", "-o", help="Where to write the optimized lens (.json).")],
     optimizer: Annotated[str | None, typer.Option("--optimizer", help="lm | adam (default: the spec's).")] = None,
     steps: Annotated[int | None, typer.Option("--steps", min=1, help="Steps (default: the spec's).")] = None,
@@ -394,18 +426,27 @@ def optimize(
     """Levenberg–Marquardt (or Adam) for spot size with solves and constraints; Ctrl-C keeps the best lens."""
     from lensopt.analysis.report import trace_report
     from lensopt.cli_optimize import LiveProgress, render_summary, summary
+    from lensopt.optics.sampling import PupilSampling
     from lensopt.optim import Problem
     from lensopt.optim import optimize as run_optimize
     from lensopt.optim.report import constraint_report
-    from lensopt.spec import save_json
+    from lensopt.spec import build, load_spec, save_json
 
     if output.suffix.lower() != ".json":
         raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
+    check_output(output)
     start_spec = load_spec(spec)
-    with LiveProgress(err_console, enabled=not quiet) as live:
-        result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live,
-                              device=device, jacobian=jacobian)
-    save_json(result.spec, output)  # atomic
+    try:
+        with LiveProgress(err_console, enabled=not quiet) as live:
+            result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live,
+                                  device=device, jacobian=jacobian)
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the first step: the best lens is the start lens
+        with signals_deferred():
+            save_json(start_spec, output)
+        word = "terminated" if state.signal_exit == 143 else "interrupted"
+        raise typer.Exit(report_signal(f"{word} before the first step; wrote the start lens to {output}")) from None
+    with signals_deferred():  # a second signal waits until the file is complete
+        save_json(result.spec, output)  # atomic
     sampling = PupilSampling.parse("rings:24", seed=seed)
     final_problem = Problem(result.spec, seed=seed)
     s = summary(result, trace_report(build(start_spec), sampling), trace_report(build(result.spec), sampling),
@@ -414,15 +455,17 @@ def optimize(
         print_json(s)
     else:
         render_summary(console, s)
-    if result.interrupted:
-        raise typer.Exit(130)
+    if result.interrupted:  # the summary above says so
+        state.signal_reported = True
+        raise typer.Exit(state.signal_exit)
 
 
 # -------------------------------------------------------------------------------------- simulate
 
 
-@app.command()
+@app.command(short_help="Simulate a scene image through the lens.")
 @handle_errors
+@with_backend(err_console)
 def simulate(
     lens: LensArg,
     image: Annotated[Path, typer.Argument(help="Scene image (PNG/JPEG/TIFF/EXR; 8/16-bit files are sRGB).")],
@@ -442,16 +485,24 @@ def simulate(
     overlap: Annotated[float, typer.Option("--overlap", help="Overlap of patches (S1.5.2).")] = 0.25,
     seed: SeedOpt = 0,
     as_json: JsonOpt = False,
+    backend: BackendOpt = "auto",
 ) -> None:
     """Simulate a scene through the lens, computing only the effects the scene calls for."""
     from lensopt.cli_imaging import parse_grid, run_simulate
+    from lensopt.resources import require
+
+    psf_grid = parse_grid(grid)
+    if psf_grid is not None:  # each cell holds RGB PSFs of up to 161×161 float32 bins, a few copies
+        require(psf_grid[0] * psf_grid[1] * 161 * 161 * 3 * 4 * 4, f"a {grid} PSF grid", lower="--grid", path="--grid")
 
     if not plan_only and output is None:
         raise LensoptError("needed unless --plan", path="--output")
+    if output is not None:
+        check_output(output, (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr"), what="image file")
     if not 0.0 <= overlap < 1.0:
         raise LensoptError("must lie in [0, 1)", path="--overlap", got=overlap)
     result = run_simulate(load_model(lens), image, output, region=region, effects=effects, reference=reference,
-                          plan_only=plan_only, sampling=rays, kernel=kernel, grid=parse_grid(grid), overlap=overlap,
+                          plan_only=plan_only, sampling=rays, kernel=kernel, grid=psf_grid, overlap=overlap,
                           seed=seed, on_plan=None if as_json else _render_plan, score=score)
     if as_json:
         print_json(result)
@@ -460,7 +511,7 @@ def simulate(
 
 
 def _render_plan(p: dict[str, Any]) -> None:
-    t = Table(title=f"plan — {p['lens']}: {p['image']['width']}×{p['image']['height']} "
+    t = _table(title=f"plan — {p['lens']}: {p['image']['width']}×{p['image']['height']} "
                     f"{'/'.join(p['channels'])} ({p['image']['encoding']}) on region {p['region']['name']} "
                     f"({p['region']['w']:.0f}×{p['region']['h']:.0f} sensor px, image pixel {p['pixel_um']:.2f} µm)",
               show_header=False)
@@ -479,7 +530,7 @@ def _render_plan(p: dict[str, Any]) -> None:
 
 
 def _render_run(r: dict[str, Any]) -> None:
-    t = Table(title="stages")
+    t = _table(title="stages")
     t.add_column("stage")
     t.add_column("s", justify="right")
     for k, v in r["timings"].items():
@@ -487,8 +538,10 @@ def _render_run(r: dict[str, Any]) -> None:
     console.print(t)
     m = r.get("metrics")
     if m:
-        console.print(f"vs {m['against']}: PSNR {m['psnr_db']:.2f} dB, SSIM {m['ssim']:.4f} ({m['space']})")
-    console.print(f"wrote {r['output']} ({r['output_encoding']}; input {r['input_encoding']})")
+        psnr = "∞ (identical)" if m["psnr_db"] == math.inf else f"{m['psnr_db']:.2f} dB"
+        ssim = f"{m['ssim']:.4f}" if math.isfinite(m["ssim"]) else "— (image smaller than the 11-pixel window)"
+        console.print(f"vs {m['against']}: PSNR {psnr}, SSIM {ssim} ({m['space']})")
+    err_console.print(f"wrote {r['output']} ({r['output_encoding']}; input {r['input_encoding']})", highlight=False)
 
 
 # ------------------------------------------------------------------------------------- plot psf
@@ -496,6 +549,7 @@ def _render_run(r: dict[str, Any]) -> None:
 
 @plot_app.command("psf")
 @handle_errors
+@with_backend(err_console)
 def plot_psf(
     lens: LensArg,
     output: Annotated[Path, typer.Option("--output", "-o", help="Figure file (png, pdf, svg).")],
@@ -506,19 +560,22 @@ def plot_psf(
                                                    "else 1 µm).")] = None,
     sqrt: Annotated[bool, typer.Option("--sqrt", help="Square-root intensity scale (shows the tails).")] = False,
     seed: SeedOpt = 0,
+    backend: BackendOpt = "auto",
+    dpi: DpiOpt = 150,
 ) -> None:
     """RGB PSFs across the field (the spec's fields)."""
     from lensopt.cli_imaging import plot_psfs
 
+    check_output(output, (".png", ".pdf", ".svg"), what="image file")
     plot_psfs(load_model(lens), output, sampling=rays, kernel=kernel, diffraction=diffraction, pitch_um=pitch_um,
-              sqrt=sqrt, seed=seed)
-    console.print(f"wrote {output}")
+              sqrt=sqrt, seed=seed, dpi=dpi)
+    err_console.print(f"wrote {output}", highlight=False)
 
 
 # ------------------------------------------------------------------------------------ plot field
 
 
-@plot_app.command("field")
+@plot_app.command("field", short_help="Distortion and relative illumination against field.")
 @handle_errors
 def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings:16", aim: AimOpt = None,
                    aim_steps: AimStepsOpt = None,
@@ -532,17 +589,32 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
 
     out = _check_output(output)
     model = load_model(lens)
-    summary = field_summary(model.lens, model.system, PupilSampling.parse(sampling, seed=seed, path="--sampling"),
+    summary = field_summary(model.lens, model.system, parse_sampling(sampling, seed),
                             rel_field=[i / (points - 1) for i in range(points)], aim=check_aim(aim),
                             aim_steps=check_aim_steps(aim_steps))
     title, sub = _titles(model)
     save_figure(field_figure(summary, title=title, subtitle=sub), out, dpi=dpi)
     err_console.print(f"wrote {output}")
 
+from lensopt.cli_check import register as _register_check  # noqa: E402
+
+_register_check(app)
+from lensopt.cli_accuracy import register as _register_accuracy  # noqa: E402
+
+_register_accuracy(app)
+
 
 from lensopt.cli_evaluate import register as _register_evaluate  # noqa: E402  (needs the app above)
 
 _register_evaluate(app)
+
+from lensopt.cli_tolerance import register as _register_tolerance  # noqa: E402
+
+_register_tolerance(app, plot_app)
+
+from lensopt.cli_zemax import register as _register_zemax  # noqa: E402
+
+_register_zemax(app)
 
 if __name__ == "__main__":  # pragma: no cover
     app()

@@ -99,7 +99,7 @@ def run_simulate(
 
 def plot_psfs(model: Model, output: Path, *, sampling: str = "rings:32", kernel: str = "triangular",
               diffraction: str = "heuristic", pitch_um: float | None = None, sqrt: bool = False,
-              seed: int = 0) -> None:
+              seed: int = 0, dpi: int = 150) -> None:
     """RGB PSFs at the spec's fields, bins of ``pitch_um`` (default: the sensor pitch, else 1 µm)."""
     from lensopt.plot.psf import save_psf_figure
 
@@ -122,4 +122,4 @@ def plot_psfs(model: Model, output: Path, *, sampling: str = "rings:32", kernel:
     with torch.no_grad():
         b = trace_bundle(lens, system, ps.points(dtype=lens.dtype), half_pupil=ps.half, rel_field=rel)
         rms = (spot_stats(b, system.wavelength_weights).rms_radius * 1e3).tolist()
-    save_psf_figure(output, stack, ww, title=spec.name, sqrt=sqrt, rms_um=rms)
+    save_psf_figure(output, stack, ww, title=spec.name, sqrt=sqrt, rms_um=rms, dpi=dpi)

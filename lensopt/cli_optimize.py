@@ -3,6 +3,7 @@ display and the final summary."""
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -13,22 +14,27 @@ from rich.text import Text
 
 from lensopt.optim.run import OptimizeResult, Progress
 
-__all__ = ["LiveProgress", "render_summary", "summary"]
+__all__ = ["LiveProgress", "plain_line", "render_summary", "summary"]
 
 
 class LiveProgress:
     """A rich Live display fed with ``Progress`` records (refreshed at most ~8 times a second)."""
 
-    def __init__(self, console: Console, *, enabled: bool = True) -> None:
+    def __init__(self, console: Console, *, enabled: bool = True, plain: bool | None = None,
+                 interval_s: float = 10.0) -> None:
         self.console = console
         self.enabled = enabled
+        # Not a terminal (CI logs, files): plain lines, at most one per ``interval_s``, plus the last step.
+        self.plain = (not console.is_terminal) if plain is None else plain
+        self.interval_s = interval_s
         self.live: Live | None = None
         self.last: Progress | None = None
         self.events: list[str] = []
         self._shown = 0.0
+        self._printed = -math.inf
 
     def __enter__(self) -> LiveProgress:
-        if self.enabled:
+        if self.enabled and not self.plain:
             self.live = Live(Text("starting…"), console=self.console, refresh_per_second=8, transient=False)
             self.live.__enter__()
         return self
@@ -46,6 +52,12 @@ class LiveProgress:
         if p.event and p.event != "merit rose":
             self.events.append(f"step {p.step}: {p.event}")
         now = time.monotonic()
+        if self.enabled and self.plain:
+            if p.event and p.event != "merit rose":
+                self.console.print(f"step {p.step}: {p.event}", highlight=False, soft_wrap=True, markup=False)
+            if now - self._printed >= self.interval_s or p.step == p.steps:
+                self._printed = now
+                self.console.print(plain_line(p), highlight=False, soft_wrap=True, markup=False)
         if self.live is not None and (now - self._shown > 0.12 or p.step == p.steps):
             self._shown = now
             self.live.update(self._render(p))
@@ -67,6 +79,15 @@ class LiveProgress:
         shares.add_row(*[f"{100 * p.shares[n]:.2f} %" for n in names])
         notes = Text("\n".join(self.events[-4:]))
         return Group(t, shares, notes)
+
+
+def plain_line(p: Progress) -> str:
+    """One progress line for logs: ``step 12/200 [phase] merit 1.234e-02, ESR 12.345 µm, …``."""
+    lam = "—" if p.damping != p.damping else f"{p.damping:.2e}"
+    esr = "—" if not math.isfinite(p.esr_um) else f"{p.esr_um:.3f} µm"
+    rays = "—" if not math.isfinite(p.valid_fraction) else f"{100 * p.valid_fraction:.1f} %"
+    return (f"step {p.step}/{p.steps} [{p.phase}] merit {p.merit:.6e}, ESR {esr}, λ {lam}, accepted {p.accepted}, "
+            f"rejected {p.rejected}, rays ok {rays}, {p.elapsed_s:.0f} s")
 
 
 def summary(result: OptimizeResult, start: dict[str, Any], final: dict[str, Any],
@@ -93,13 +114,17 @@ def summary(result: OptimizeResult, start: dict[str, Any], final: dict[str, Any]
     }
 
 
+def _um(v: float | None) -> str:
+    return "— (rays fail)" if v is None else f"{v:.4f} µm"
+
+
 def render_summary(console: Console, s: dict[str, Any]) -> None:
     """Final tables: spot size start → end, first-order data, constraint values, glasses."""
     fin, st = s["final"], s["start"]
     head = "interrupted — best lens so far" if s["interrupted"] else f"stopped: {s['stop_reason']}"
     console.print(f"[bold]{head}[/] after {s['steps']} steps, {s['elapsed_s']:.1f} s; written to {s['output']}")
-    console.print(f"effective spot radius ({fin['sampling']}): {st['effective_spot_radius_um']:.4f} µm → "
-                  f"[bold]{fin['effective_spot_radius_um']:.4f} µm[/]")
+    console.print(f"effective spot radius ({fin['sampling']}): {_um(st['effective_spot_radius_um'])} → "
+                  f"[bold]{_um(fin['effective_spot_radius_um'])}[/]")
     psnr = s.get("held_out_psnr_db", {})
     if psnr and psnr["start"] == psnr["start"]:
         console.print(f"held-out raw PSNR: {psnr['start']:.3f} dB → [bold]{psnr['final']:.3f} dB[/]")

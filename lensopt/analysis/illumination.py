@@ -11,11 +11,14 @@ when the field list starts at 0, as it usually does).
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import Tensor
 
 from lensopt.analysis.spot import safe_sqrt
 from lensopt.optics.bundle import Bundle
+from lensopt.optics.trace import Status
 
 __all__ = ["relative_illumination_std", "relative_illumination_three_ray", "THREE_RAY_PUPIL"]
 
@@ -51,11 +54,14 @@ def relative_illumination_std(bundle: Bundle, wavelength_weights: Tensor) -> Ten
 
 def relative_illumination_three_ray(bundle: Bundle, wavelength: int) -> Tensor:
     """(F,) S51 estimate from a bundle traced with the pupil points ``THREE_RAY_PUPIL`` (P = 3)
-    at wavelength index ``wavelength``; fields whose three rays do not all pass give 0."""
+    at wavelength index ``wavelength``. A field whose three rays are all stopped by the front aperture
+    gives 0 (no light); one where any of them fails otherwise gives NaN (not measurable, never 0)."""
     d = bundle.result.dir[:, wavelength]  # (F, 3, 3)
     ok = bundle.result.valid[:, wavelength].all(-1)
+    blocked = (bundle.result.status[:, wavelength] == Status.BLOCKED).all(-1)
     alpha_l = d[:, 0, 0]
     beta_i, beta_s = d[:, 1, 1], d[:, 2, 1]
     ref = _reference_field(bundle)
     r = alpha_l.abs() * (beta_i - beta_s).abs() / (2.0 * beta_s[ref] ** 2)
-    return torch.where(ok, r, torch.zeros_like(r))
+    r = torch.where(ok & ok[ref], r, torch.full_like(r, math.nan))
+    return torch.where(blocked, torch.zeros_like(r), r)

@@ -24,10 +24,10 @@ from torch import Tensor
 
 from lensopt.errors import LensoptError
 from lensopt.optics.aiming import aim_full, stop_radius
+from lensopt.optics.backend import trace_with
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import field_tangents, first_order
 from lensopt.optics.sampling import launch
-from lensopt.optics.trace import trace
 from lensopt.optics.vignetting import factors_to_ellipse, outside_front_aperture
 
 __all__ = ["FluxIllumination", "relative_illumination_flux"]
@@ -118,7 +118,7 @@ def relative_illumination_flux(
                 part = pupil[lo:lo + tile]
                 rays = launch(clipped, system, part.expand(len(g), num_w, *part.shape), tan,
                               epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z)
-                res = trace(clipped, rays)
+                res = trace_with(clipped, rays)
                 ok = res.valid
                 if system.front_aperture is not None:
                     fa = system.front_aperture

@@ -80,13 +80,18 @@ def trace_report(
                                                                                 "chief"))}
             pupil["aim_converged"] = bool(summary.aim_converged[h].all())
             pupil["aim_rays_traced"] = bool(summary.aim_traced[h].all()) if summary.aim_traced is not None else False
+        # Failed quantities are None (null in JSON, "—" in tables), never 0: a wavelength (or field) where
+        # no ray reaches the image has no spot to measure; the reason is in "failures" and the notes.
+        lit_w = (status == Status.OK).flatten(1).any(-1).tolist()
+        chief_ok = bool(chief.result.status[h, ref, 0] == Status.OK)
         fields.append({
             "relative": system.rel_field[h],
             "angle_deg": math.degrees(math.atan(float(bundle.tan_field[h]))),
-            "rms_spot_radius_um": [1e3 * float(v) for v in stats.rms_radius_w[h]],
-            "rms_spot_radius_weighted_um": 1e3 * float(stats.rms_radius[h]),
-            "centroid_y_mm": float(stats.centroid[h, 1]),
-            "chief_ray_y_mm": float(chief.result.pos[h, ref, 0, 1]),
+            "rms_spot_radius_um": [_finite(1e3 * float(v)) if lit_w[w] else None
+                                   for w, v in enumerate(stats.rms_radius_w[h])],
+            "rms_spot_radius_weighted_um": _finite(1e3 * float(stats.rms_radius[h])) if lit else None,
+            "centroid_y_mm": _finite(float(stats.centroid[h, 1])) if lit else None,
+            "chief_ray_y_mm": _finite(float(chief.result.pos[h, ref, 0, 1])) if chief_ok else None,
             "failed_rays": int((status != Status.OK).sum()),
             "failures": {REASONS[r]: int((status == r).sum()) for r in REASONS if (status == r).any()},
             "backtracking_rays": int(bundle.result.backtrack[h].sum()),
@@ -95,8 +100,8 @@ def trace_report(
             # front aperture blocks the whole beam (nothing gets through).
             "distortion_percent": 100.0 * float(summary.distortion[h]) if lit else None,
             "paraxial_image_height_mm": float(summary.paraxial_height_mm[h]),
-            "relative_illumination": {"three_ray": float(summary.ri_three_ray[h]) if lit or dark else None,
-                                      "std": float(summary.ri_std[h]) if lit or dark else None},
+            "relative_illumination": {"three_ray": _finite(float(summary.ri_three_ray[h])) if lit or dark else None,
+                                      "std": _finite(float(summary.ri_std[h])) if lit or dark else None},
             "vignetting": pupil,
         })
     report: dict[str, Any] = {
@@ -123,12 +128,17 @@ def trace_report(
         "front_aperture": (dataclasses.asdict(system.front_aperture) if system.front_aperture is not None
                            else None),
         "stop_radius_mm": summary.stop_radius_mm,
-        "effective_spot_radius_um": 1e3 * float(stats.effective_radius),
+        "effective_spot_radius_um": (_finite(1e3 * float(stats.effective_radius))
+                                     if all(f["rms_spot_radius_weighted_um"] is not None for f in fields) else None),
         "fields": fields,
         "notes": list(summary.notes),
         "surfaces": prescription(model, sd),
     }
     return report
+
+
+def _finite(v: float) -> float | None:
+    return v if math.isfinite(v) else None
 
 
 def _table(row: torch.Tensor, first_power: int) -> dict[str, float]:
@@ -209,25 +219,36 @@ def ray_report(
             out = outside_front_aperture(pos, dirs, fa.distance, fa.diameter)
             result = dataclasses.replace(result, status=torch.where(
                 out, torch.full_like(result.status, int(Status.BLOCKED)), result.status))
+    status = int(result.status.reshape(()).item())
+    # Where the ray failed, numbers past the failure are meaningless: None (null, "—"), never shown.
+    failed_at = len(result.hits) + 1
+    if status != 0:
+        failed_at = -1 if status == int(Status.BLOCKED) or result.failed_at is None else int(result.failed_at.item())
+    none3 = {k: None for k in ("x", "y", "z", "L", "M", "N")}
     surfaces = []
     for i, hit in enumerate(result.hits):
         p, d = hit.pos.reshape(3), hit.dir_out.reshape(3)
         aoi = math.degrees(math.acos(min(1.0, math.sqrt(max(0.0, float(hit.cos2_in.reshape(()).item()))))))
         c2o = float(hit.cos2_out.reshape(()).item())
         aor = math.degrees(math.acos(min(1.0, math.sqrt(c2o)))) if c2o >= 0 else None
-        surfaces.append({"surface": i + 1, "x": float(p[0]), "y": float(p[1]), "z": float(p[2]),
-                         "L": float(d[0]), "M": float(d[1]), "N": float(d[2]),
-                         "aoi_deg": aoi, "aor_deg": aor})
+        entry: dict[str, Any] = {"surface": i + 1, "x": float(p[0]), "y": float(p[1]), "z": float(p[2]),
+                                 "L": float(d[0]), "M": float(d[1]), "N": float(d[2]), "aoi_deg": aoi, "aor_deg": aor}
+        if i > failed_at or (i == failed_at and status != int(Status.TIR)):
+            entry.update(none3, aoi_deg=None, aor_deg=None)
+        elif i == failed_at:  # TIR: the ray reaches the surface but does not leave it
+            entry.update(L=None, M=None, N=None, aor_deg=None)
+        surfaces.append(entry)
     img = result.pos.reshape(3)
     d = result.dir.reshape(3)
-    status = int(result.status.reshape(()).item())
+    image = ({"x": float(img[0]), "y": float(img[1]), "z": float(img[2]), "L": float(d[0]), "M": float(d[1]),
+              "N": float(d[2])} if status == 0 else dict(none3))
     return {
         "field_deg": field_deg, "pupil": [float(pupil[0, 0, 0, 0]), float(pupil[0, 0, 0, 1])],
         "wavelength_nm": wavelength_nm, "aim": aim,
         "start": [float(v) for v in rays.pos.reshape(3)],
         "surfaces": surfaces,
-        "image": {"x": float(img[0]), "y": float(img[1]), "z": float(img[2]),
-                  "L": float(d[0]), "M": float(d[1]), "N": float(d[2])},
+        "image": image,
         "status": "ok" if status == 0 else REASONS[Status(status)],
+        "failed_at_surface": None if status == 0 or failed_at < 0 else failed_at + 1,
         "backtracking": bool(result.backtrack.reshape(()).item()),
     }

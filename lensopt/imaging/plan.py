@@ -224,7 +224,8 @@ def make_plan(
     return ScenePlan(
         lens=lens_name,
         image=image,
-        sensor={"pixel_pitch_um": sensor.pitch_mm * 1e3, "resolution": [sensor.width, sensor.height]},
+        sensor={"pixel_pitch_um": round(sensor.pitch_mm * 1e3, 9),  # 7.2, not 7.200000000000001
+                "resolution": [sensor.width, sensor.height]},
         region=region.as_dict(),
         pixel_um=px * 1e3,
         channels=names,

@@ -105,6 +105,8 @@ def parse_region(text: str | None, sensor: Sensor, image_w: int, image_h: int, *
 
 
 def _checked(reg: Region, sensor: Sensor, option: str, text: str | None) -> Region:
+    if not all(math.isfinite(v) for v in (reg.x0, reg.y0, reg.w, reg.h)):
+        raise LensoptError("region numbers must be finite", path=option, got=text)
     if not (reg.w > 0 and reg.h > 0):
         raise LensoptError("region width and height must be positive", path=option, got=text)
     eps = 1e-6

@@ -206,17 +206,18 @@ def _materials(model: Model, private_catalog: bool) -> tuple[list[str], list[_Pr
     return names, privates
 
 
-def _private_label(material: str | ModelGlassSpec | TabulatedGlassSpec) -> str:
+def _private_label(material: Any) -> str:
     if isinstance(material, str):
         return material.rpartition(":")[2]
-    return material.name or "MODEL"
+    return getattr(material, "name", None) or getattr(material, "glass", None) or "MODEL"
 
 
-def _material_json(material: str | ModelGlassSpec | TabulatedGlassSpec) -> Any:
+def _material_json(material: Any) -> Any:
     if isinstance(material, str):
         return material
-    return material.model_dump(mode="json", exclude_none=True) | {"type": (
-        "model" if isinstance(material, ModelGlassSpec) else "tabulated")}
+    kind = ("model" if isinstance(material, ModelGlassSpec) else "tabulated"
+            if isinstance(material, TabulatedGlassSpec) else "agf")
+    return material.model_dump(mode="json", exclude_none=True) | {"type": kind}
 
 
 def _private_wavelengths(spec: LensSpec, privates: list[_Private]) -> list[float]:

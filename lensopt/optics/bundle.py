@@ -21,10 +21,11 @@ import torch
 from torch import Tensor
 
 from lensopt.optics.aiming import ChiefAim, PupilAim, aim_chief, aim_full
+from lensopt.optics.backend import trace_with
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import FirstOrder, field_tangents, first_order
 from lensopt.optics.sampling import launch
-from lensopt.optics.trace import Rays, RayTrace, Status, trace
+from lensopt.optics.trace import Rays, RayTrace, Status
 from lensopt.optics.vignetting import (
     apply_vignetting,
     clip_ellipse_to_disc,
@@ -34,6 +35,7 @@ from lensopt.optics.vignetting import (
     front_aperture_disc,
     outside_front_aperture,
 )
+from lensopt.resources import BYTES_PER_RAY_SURFACE, require
 
 __all__ = ["Bundle", "PupilShape", "pupil_shape", "trace_bundle", "AIM_MODES"]
 
@@ -140,6 +142,8 @@ def trace_bundle(
     vignetting: Tensor | None = None,
     aim_steps: int | None = None,
     shape: PupilShape | None = None,
+    rel_field_x: Tensor | None = None,
+    backend: str | None = None,
 ) -> Bundle:
     """Trace pupil points ``pupil`` ((P, 2) or (F, W, P, 2)) for every field and wavelength.
 
@@ -154,15 +158,33 @@ def trace_bundle(
         aim_steps: Newton steps of ``full`` aiming; default: the system's.
         shape: the pupil shape already computed by ``pupil_shape`` for these fields (saves aiming
             again when several bundles share fields); ``aim``/``vignetting`` are then not used.
+        rel_field_x: (F,) relative fields in x (two-dimensional fields, for lenses that are not
+            rotationally symmetric), scaled like ``rel_field``; needs ``aim = none``.
+        backend: ``auto``, ``eager`` or ``compiled`` (``optics.backend``); default: ``use_backend``'s.
+
+    A lens with a placement (decentered or tilted surfaces) has no mirror symmetry: a half-pupil
+    sampling is mirrored to the full pupil here and ``half_pupil`` becomes False, so centroids are
+    computed in x and y.
     """
     fo = first_order(lens, system) if fo is None else fo
     if rel_field is None:
         rel_field = torch.tensor(system.rel_field, dtype=lens.dtype, device=lens.device)
     tan = field_tangents(lens, system, rel_field)
     mode = system.aim if aim is None else aim
+    tan_x = None
+    if rel_field_x is not None:
+        if mode != "none":
+            raise ValueError("two-dimensional fields (rel_field_x) are traced with aim = none only")
+        tan_x = field_tangents(lens, system, rel_field_x.to(lens.dtype))
     pupil = pupil.to(dtype=lens.dtype, device=lens.device)
+    if lens.placement is not None and half_pupil:  # no symmetry: the mirrored half too
+        pupil = torch.cat([pupil, pupil * torch.tensor([-1.0, 1.0], dtype=pupil.dtype, device=pupil.device)], -2)
+        half_pupil = False
     if pupil.dim() == 2:
         pupil = pupil.expand(rel_field.shape[0], lens.wavelength_um.shape[0], *pupil.shape)
+    rays_n = pupil.numel() // 2
+    require(rays_n * (len(lens.shapes) + 2) * BYTES_PER_RAY_SURFACE, f"tracing {rays_n:,} rays",
+            lower="the pupil sampling (rings:N / grid:N) or the number of fields and wavelengths")
     if vignetting is None and system.vignetting and len(system.vignetting) == rel_field.shape[0]:
         vignetting = torch.tensor(system.vignetting, dtype=lens.dtype, device=lens.device).unsqueeze(1)
     if shape is None:
@@ -170,8 +192,8 @@ def trace_bundle(
                             aim_steps=system.aim_steps if aim_steps is None else aim_steps)
     if shape.factors is not None:
         pupil = apply_vignetting(pupil, shape.factors)
-    rays = launch(lens, system, pupil, tan, epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z)
-    result = trace(lens, rays, record=record)
+    rays = launch(lens, system, pupil, tan, epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z, tan_field_x=tan_x)
+    result = trace_with(lens, rays, record=record, backend=backend)
     fa = system.front_aperture
     if fa is not None:
         # Rays outside the opening (a field blocked entirely, or the corners of an ``extent`` ellipse)

@@ -77,6 +77,8 @@ def compiled_trace(
     Compilation takes tens of seconds the first time per structure (Inductor caches kernels on
     disk, so later processes are faster); use it when the trace is called on ≳1e5 rays or many times.
     """
+    if lens.placement is not None:  # decentered/tilted lenses: the eager trace (not compiled yet)
+        return trace(lens, rays, upto=upto, record=record, newton_iterations=newton_iterations)
     args = [getattr(lens, name) for name in _LENS_TENSORS]
     if _forward_mode(args + [rays.pos, rays.dir]):
         # torch.compile drops forward-mode tangents of a graph called from outside it (measured:

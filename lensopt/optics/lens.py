@@ -14,6 +14,8 @@ from typing import Literal
 import torch
 from torch import Tensor
 
+from lensopt.optics.placement import Placement
+
 __all__ = ["SurfaceShape", "Lens", "System", "FrontAperture"]
 
 ShapeKind = Literal["plane", "sphere", "conic", "asphere"]
@@ -53,6 +55,8 @@ class Lens:
         wavelength_um: (W,) wavelengths, µm.
         semi_diameter: (S,) clear semi-aperture, mm (0 where not given: derived from traced rays).
         stop: index of the aperture stop surface.
+        placement: decenters and tilts of surfaces and elements (``optics.placement``), or None for a
+            lens on its axis (the rotationally symmetric fast path).
     """
 
     shapes: tuple[SurfaceShape, ...]
@@ -65,6 +69,7 @@ class Lens:
     wavelength_um: Tensor
     semi_diameter: Tensor
     stop: int
+    placement: Placement | None = None
 
     @property
     def num_surfaces(self) -> int:
@@ -90,7 +95,8 @@ class Lens:
             for name in ("curvature", "conic", "asphere", "phase", "thickness", "index",
                          "wavelength_um", "semi_diameter")
         }
-        return Lens(shapes=self.shapes, stop=self.stop, **cast)
+        placement = None if self.placement is None else self.placement.to(dtype)
+        return Lens(shapes=self.shapes, stop=self.stop, placement=placement, **cast)
 
 
 @dataclass(frozen=True)

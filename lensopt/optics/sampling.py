@@ -17,6 +17,7 @@ from torch import Tensor
 from lensopt.errors import SpecError
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.trace import Rays
+from lensopt.resources import require
 
 __all__ = ["PupilSampling", "pupil_rings", "pupil_grid", "fan", "launch"]
 
@@ -45,6 +46,7 @@ class PupilSampling:
 
     def points(self, *, dtype: torch.dtype, device: torch.device | None = None) -> Tensor:
         """(P, 2) relative pupil coordinates."""
+        require(64 * self.n**2, f"{self} pupil sampling ({self.n**2:,} points)", lower="N of rings:N / grid:N")
         if self.kind == "rings":
             return pupil_rings(self.n, jitter=self.jitter, seed=self.seed, dtype=dtype, device=device)
         return pupil_grid(self.n, dtype=dtype, device=device)
@@ -111,6 +113,7 @@ def launch(
     *,
     epd: Tensor,
     entrance_pupil_z: Tensor,
+    tan_field_x: Tensor | None = None,
 ) -> Rays:
     """Object-space rays through relative pupil points for each field and wavelength (S1.3.1).
 
@@ -124,6 +127,9 @@ def launch(
         tan_field: (F,) object-space chief-ray slopes.
         epd: () entrance pupil diameter, mm.
         entrance_pupil_z: () entrance pupil position from surface 1, mm.
+        tan_field_x: (F,) object-space slopes in x for two-dimensional fields (non-symmetric lenses);
+            None: 0. The direction is then ∝ (tan θ_x, tan θ_y, 1), the object point at
+            (−tan θ_x, −tan θ_y)·(z_EP + distance).
 
     Returns:
         Rays of batch shape (F, W, P); ``wavelength`` has shape (1, W, 1).
@@ -136,14 +142,20 @@ def launch(
     z = torch.zeros_like(x) + entrance_pupil_z
     target = torch.stack([x, y, z], -1)
     tan = tan_field[:, None, None]
+    tan_x = None if tan_field_x is None else tan_field_x[:, None, None]
     if system.object_distance is None:
-        cos = 1.0 / torch.sqrt(1.0 + tan * tan)
-        d = torch.stack([torch.zeros_like(cos), tan * cos, cos], -1).expand_as(target)
+        if tan_x is None:
+            cos = 1.0 / torch.sqrt(1.0 + tan * tan)
+            d = torch.stack([torch.zeros_like(cos), tan * cos, cos], -1).expand_as(target)
+        else:
+            cos = 1.0 / torch.sqrt(1.0 + tan * tan + tan_x * tan_x)
+            d = torch.stack([tan_x * cos, tan * cos, cos], -1).expand_as(target)
         pos = target
     else:
         z_obj = -system.object_distance
         h = -tan * (entrance_pupil_z - z_obj)
-        obj = torch.stack([torch.zeros_like(h), h, torch.zeros_like(h) + z_obj], -1)
+        hx = torch.zeros_like(h) if tan_x is None else -tan_x * (entrance_pupil_z - z_obj)
+        obj = torch.stack([hx, h, torch.zeros_like(h) + z_obj], -1)
         d = target - obj
         d = d / torch.linalg.vector_norm(d, dim=-1, keepdim=True)
         pos = obj.expand_as(target)

@@ -18,6 +18,7 @@ from torch import Tensor
 from lensopt.optics.interact import bend_xyz
 from lensopt.optics.intersect import NEWTON_ITERATIONS, asphere_xyz, quadric_xyz
 from lensopt.optics.lens import Lens
+from lensopt.optics.placement import surface_frames, to_global, to_local
 from lensopt.optics.surfaces import conic_normal_xyz, normal_xyz, phase_slope, sag
 
 __all__ = ["Status", "REASONS", "Rays", "SurfaceHit", "RayTrace", "trace", "failure_counts"]
@@ -141,6 +142,9 @@ def trace(
     failed_at = torch.full(batch, -1.0, dtype=pos.dtype, device=pos.device) if record else None
     backtrack = torch.zeros(batch, dtype=torch.bool, device=pos.device)
     vertex = lens.vertex_z()
+    # Decentered/tilted surfaces: rays go into each surface's frame and back (optics.placement);
+    # a lens on its axis skips every transform (the symmetric fast path).
+    frames = None if lens.placement is None else surface_frames(lens.thickness, lens.placement)
     lam_mm = lens.wavelength_um[rays.wavelength] * 1e-3
     inv_index = 1.0 / lens.index  # (S+1, W): one division per medium, not per ray and surface
     # Components: fused kernels vectorize over rays only when x, y, z are separate tensors.
@@ -151,7 +155,12 @@ def trace(
     for s in range(last + 1):
         shape = lens.shapes[s]
         c, k = lens.curvature[s], lens.conic[s]
-        lz = z - vertex[s]
+        if frames is not None:
+            x, y, z = to_local((x, y, z), frames.origin[s], frames.rotation[s])
+            dx, dy, dz = to_local((dx, dy, dz), None, frames.rotation[s])
+            lz = z
+        else:
+            lz = z - vertex[s]
         if shape.kind == "asphere":
             t, defined, converged = asphere_xyz((x, y, lz), (dx, dy, dz), c, k, lens.asphere[s],
                                                 iterations=newton_iterations)
@@ -174,9 +183,13 @@ def trace(
             normal = conic_normal_xyz(hx, hy, hz, c, k)
         else:  # sphere or plane: (−cx, −cy, 1 − cz) is a unit vector on the surface, no normalisation
             normal = (-c * hx, -c * hy, 1.0 - c * hz)
-        hz = hz + vertex[s]
+        if frames is None:
+            hz = hz + vertex[s]
         if upto is not None and s == upto:
             x, y, z = torch.where(ok, hx, x), torch.where(ok, hy, y), torch.where(ok, hz, z)
+            if frames is not None:
+                x, y, z = to_global((x, y, z), frames.origin[s], frames.rotation[s])
+                dx, dy, dz = to_global((dx, dy, dz), None, frames.rotation[s])
             break
         grating = None
         if shape.diffractive:
@@ -189,16 +202,28 @@ def trace(
         status, ok = _fail(status, ok, tir, Status.TIR)
         failed_at = _first_failure(failed_at, ok, s)
         if record:
-            hits.append(SurfaceHit(torch.stack([hx, hy, hz], -1), torch.stack([dx, dy, dz], -1),
-                                   torch.stack(d_out, -1), torch.stack(normal, -1), t, cos2_in, cos2_out))
+            rec = ((hx, hy, hz), (dx, dy, dz), d_out, normal)
+            if frames is not None:
+                o, r = frames.origin[s], frames.rotation[s]
+                rec = (to_global(rec[0], o, r),) + tuple(to_global(v, None, r) for v in rec[1:])
+            hits.append(SurfaceHit(*(torch.stack(v, -1) for v in rec), t, cos2_in, cos2_out))
         x, y, z = torch.where(ok, hx, x), torch.where(ok, hy, y), torch.where(ok, hz, z)
         # Failed rays keep their last valid position and continue as placeholders along the axis.
         dx, dy, dz = torch.where(ok, d_out[0], 0.0), torch.where(ok, d_out[1], 0.0), torch.where(ok, d_out[2], 1.0)
+        if frames is not None:
+            x, y, z = to_global((x, y, z), frames.origin[s], frames.rotation[s])
+            dx, dy, dz = to_global((dx, dy, dz), None, frames.rotation[s])
     else:
-        # Flat image surface at the end of the last gap.
+        # Flat image surface at the end of the last gap (with a placement: in the image frame, whose
+        # x, y are reported, at the nominal image z).
+        image_z = vertex[-1]
+        if frames is not None:
+            x, y, z = to_local((x, y, z), frames.origin[-1], frames.rotation[-1])
+            dx, dy, dz = to_local((dx, dy, dz), None, frames.rotation[-1])
+            x, y, z = x, y, z + image_z
         eps = torch.finfo(dz.dtype).eps
         parallel = dz.abs() <= eps
-        t = (vertex[-1] - z) / torch.where(parallel, 1.0, dz)
+        t = (image_z - z) / torch.where(parallel, 1.0, dz)
         status, ok = _fail(status, ok, parallel, Status.MISSED)
         failed_at = _first_failure(failed_at, ok, lens.num_surfaces)
         backtrack = backtrack | ((t < 0) & ok)

@@ -21,7 +21,8 @@ capped at ``MAX_DAMPING`` so that running on past the stopping rules never overf
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import torch
@@ -53,6 +54,43 @@ class StepInfo:
     merit: float
     damping: float
     reason: str
+
+
+_THREADS: list[int] = []
+
+
+@contextlib.contextmanager
+def one_thread() -> Iterator[None]:
+    """Run the reductions and the least-squares solve that decide the optimizer's path on one thread.
+
+    Multi-threaded BLAS/LAPACK and torch's parallel reductions split sums by thread count, so the same
+    problem took different paths with 1 and 2 threads (README, "Determinism"). These are small
+    (M × N with N variables), so one thread costs little; the residual evaluations keep all threads.
+    """
+    n = torch.get_num_threads()
+    _THREADS.append(n)
+    if n != 1:
+        torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        _THREADS.pop()
+        if n != 1:
+            torch.set_num_threads(n)
+
+
+@contextlib.contextmanager
+def all_threads() -> Iterator[None]:
+    """Inside ``one_thread``: the caller's thread count again (for the residual evaluations)."""
+    n = _THREADS[-1] if _THREADS else torch.get_num_threads()
+    if n == torch.get_num_threads():
+        yield
+        return
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(1)
 
 
 def damped_step(J: Tensor, r: Tensor, D: Tensor, damping: float) -> Tensor:
@@ -114,13 +152,15 @@ class LevenbergMarquardt:
     def merit(self, scale: Tensor) -> float:
         """½‖s ⊙ ℓ(θ)‖² at the current θ."""
         self._ensure_jacobian(scale)
-        return 0.5 * float(((scale * self._r) ** 2).sum())
+        with one_thread():
+            return 0.5 * float(((scale * self._r) ** 2).sum())
 
     def _ensure_jacobian(self, scale: Tensor) -> None:
         if self._J is None:
             J, r = self._jacobian(self.theta)
             self._J, self._r = J.detach(), r.detach()
-            col = torch.linalg.vector_norm(scale[:, None] * self._J, dim=0)
+            with one_thread():
+                col = torch.linalg.vector_norm(scale[:, None] * self._J, dim=0)
             col = torch.where(torch.isfinite(col), col, torch.zeros_like(col))
             s = self.settings
             if self.D is None:
@@ -130,8 +170,12 @@ class LevenbergMarquardt:
 
     def step(self, scale: Tensor) -> StepInfo:
         """One iteration with row multipliers ``scale`` (M,) (1 everywhere for a fixed merit)."""
-        s = self.settings
         self._ensure_jacobian(scale)
+        with one_thread():
+            return self._step(scale)
+
+    def _step(self, scale: Tensor) -> StepInfo:
+        s = self.settings
         J, r = scale[:, None] * self._J, scale * self._r
         if not bool(torch.isfinite(r).all()):
             return self._reject(float("inf"), "non-finite residuals")
@@ -144,7 +188,8 @@ class LevenbergMarquardt:
         delta = damped_step(J, r, self.D, self.damping)
         if not bool(torch.isfinite(delta).all()):
             return self._reject(merit, "non-finite step")
-        trial = self._evaluate(self.theta + delta)
+        with all_threads():
+            trial = self._evaluate(self.theta + delta)
         if not trial.physical:
             return self._reject(merit, trial.reason)
         new = 0.5 * float(((scale * trial.residuals) ** 2).sum())

@@ -20,7 +20,7 @@ def psf_rgb(stack: PsfStack, channel_weights: np.ndarray) -> np.ndarray:
 
 
 def save_psf_figure(path: str | Path, stack: PsfStack, channel_weights: np.ndarray, *, title: str,
-                    sqrt: bool = False, rms_um: list[float] | None = None) -> None:
+                    sqrt: bool = False, rms_um: list[float] | None = None, dpi: int = 150) -> None:
     """Write the figure atomically (format from the suffix)."""
     import matplotlib
 
@@ -49,5 +49,5 @@ def save_psf_figure(path: str | Path, stack: PsfStack, channel_weights: np.ndarr
                  f"{stack.settings.kernel}, diffraction {stack.settings.diffraction})", fontsize=9)
     fig.tight_layout()
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=150)
+        fig.savefig(tmp, dpi=dpi)
     plt.close(fig)

@@ -11,9 +11,17 @@ from lensopt.errors import LensoptError
 from lensopt.imaging.camera import Camera, SpectrumData
 from lensopt.materials import Material, ModelGlass, TabulatedGlass, material_from_name
 from lensopt.optics.lens import FrontAperture, Lens, SurfaceShape, System
-from lensopt.spec.models import DiffractiveSurface, LensSpec, ModelGlassSpec, TabulatedGlassSpec, curvature_of
+from lensopt.optics.placement import Placement
+from lensopt.spec.models import (
+    AgfGlassSpec,
+    DiffractiveSurface,
+    LensSpec,
+    ModelGlassSpec,
+    TabulatedGlassSpec,
+    curvature_of,
+)
 
-__all__ = ["Model", "build", "camera_of", "resolve_material"]
+__all__ = ["Model", "build", "camera_of", "placement_of", "resolve_material"]
 
 
 @dataclass(frozen=True)
@@ -42,13 +50,17 @@ class Model:
         return camera_of(self)
 
 
-def resolve_material(value: str | ModelGlassSpec | TabulatedGlassSpec, *, path: str) -> Material:
+def resolve_material(value: str | ModelGlassSpec | TabulatedGlassSpec | AgfGlassSpec, *, path: str) -> Material:
     """Material object for a spec's ``material`` value; errors name ``path``."""
     try:
         if isinstance(value, ModelGlassSpec):
             return ModelGlass(value.nd, value.vd, value.dpgf, name=value.name)
         if isinstance(value, TabulatedGlassSpec):
             return TabulatedGlass(value.name, tuple(w * 1e-3 for w in value.wavelengths_nm), tuple(value.index))
+        if isinstance(value, AgfGlassSpec):
+            from lensopt.materials.agf import agf_glass
+
+            return agf_glass(value.catalog, value.glass)
         return material_from_name(value)
     except LensoptError as err:
         raise err.at(path) from None
@@ -97,6 +109,7 @@ def build(spec: LensSpec, *, dtype: torch.dtype = torch.float64, device: torch.d
         wavelength_um=wl,
         semi_diameter=torch.tensor([s.semi_diameter or 0.0 for s in spec.surfaces], **opts),
         stop=spec.stop_index,
+        placement=placement_of(spec, **opts),
     )
     sysm = spec.system
     fld = sysm.field
@@ -145,3 +158,25 @@ def _coefficient_table(rows: list[dict[int, float]], *, first_power: int, dtype,
         for power, value in r.items():
             table[i, (power - first_power) // 2] = value
     return table
+
+
+def placement_of(spec: LensSpec, *, dtype: torch.dtype, device: torch.device | None) -> Placement | None:
+    """The spec's surface and element decenters/tilts (degrees → radians), or None when every surface
+    and element sits on the axis (the trace then takes the symmetric fast path)."""
+    surfs, elements = spec.surfaces, spec.elements or []
+    zero = (0.0, 0.0)
+    dec = [s.decenter or zero for s in surfs]
+    tilt = [s.tilt_deg or zero for s in surfs]
+    moved = [e for e in elements if e.decenter != zero or e.tilt_deg != zero]
+    if all(d == zero for d in dec) and all(t == zero for t in tilt) and not moved:
+        return None
+    rad = torch.pi / 180.0
+    opts = {"dtype": dtype, "device": device}
+    return Placement(
+        decenter=torch.tensor(dec, **opts),
+        tilt=torch.tensor(tilt, **opts) * rad,
+        basic=tuple(s.decenter_mode == "basic" for s in surfs),
+        groups=tuple((e.surfaces[0], e.surfaces[1]) for e in elements),
+        group_decenter=torch.tensor([list(e.decenter) for e in elements], **opts).reshape(-1, 2),
+        group_tilt=torch.tensor([list(e.tilt_deg) for e in elements], **opts).reshape(-1, 2) * rad,
+    )

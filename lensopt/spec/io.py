@@ -20,7 +20,7 @@ from lensopt.io.files import write_text_atomic
 from lensopt.spec import models
 from lensopt.spec.models import LensSpec
 
-__all__ = ["load_spec", "parse_spec", "dump_json", "save_json", "format_loc"]
+__all__ = ["load_spec", "parse_spec", "dump_json", "save_json", "format_loc", "load_tolerances"]
 
 
 def load_spec(path: str | Path) -> LensSpec:
@@ -45,7 +45,14 @@ def load_spec(path: str | Path) -> LensSpec:
         raise SpecError(f"malformed TOML: {err}", path=str(path)) from None
     except json.JSONDecodeError as err:
         raise SpecError(f"malformed JSON: {err}", path=str(path)) from None
-    return parse_spec(data)
+    except RecursionError:
+        raise SpecError("nested too deeply to be a lens", path=str(path)) from None
+    except ValueError as err:  # an integer of more than 4300 digits
+        raise SpecError(f"unreadable number: {err}", path=str(path)) from None
+    try:
+        return parse_spec(data)
+    except RecursionError:
+        raise SpecError("nested too deeply to be a lens", path=str(path)) from None
 
 
 def parse_spec(data: dict[str, Any]) -> LensSpec:
@@ -72,18 +79,22 @@ def save_json(spec: LensSpec, path: str | Path) -> None:
 def format_loc(loc: tuple[Any, ...]) -> str:
     """``('surfaces', 3, 'sphere', 'radius')`` → ``surfaces[3].radius`` (union tags dropped)."""
     out = ""
+    after_tag = False
     for part in loc:
+        # A tag names the union member; "conic" is also a field of the conic member (conic.conic).
+        if not isinstance(part, int) and _is_tag(part) and not (after_tag and part == "conic"):
+            after_tag = True
+            continue
+        after_tag = False
         if isinstance(part, int):
             out += f"[{part}]"
-        elif _is_tag(part):
-            continue
         else:
             out += f".{part}" if out else str(part)
     return out
 
 
 _UNION_TAGS = {"plane", "sphere", "conic", "asphere", "diffractive", "str", "ModelGlassSpec", "TabulatedGlassSpec",
-               "ObjectSpec"}
+               "AgfGlassSpec", "ObjectSpec"}
 
 #: What a value of a union field may be, for values that fit none of the alternatives.
 _UNION_HINTS = {
@@ -122,7 +133,8 @@ def _drop_other_alternative(real: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """A material table is tried as a model glass, then as a tabulated glass: when one alternative has a
     real complaint, the other alternative's missing or unknown fields are noise, not further errors."""
     def in_union(e: dict[str, Any]) -> bool:
-        return any("ModelGlassSpec" in str(p) or "TabulatedGlassSpec" in str(p) for p in e["loc"])
+        return any(any(k in str(p) for k in ("ModelGlassSpec", "TabulatedGlassSpec", "AgfGlassSpec"))
+                   for p in e["loc"])
 
     if any(in_union(e) and e["type"] not in ("missing", "extra_forbidden") for e in real):
         return [e for e in real if not (in_union(e) and e["type"] in ("missing", "extra_forbidden"))]
@@ -177,3 +189,25 @@ def _to_spec_error(err: ValidationError) -> SpecError:
     if extra > 0:
         msg += f" [+{extra} more]"
     return SpecError(msg, path=loc or "spec", got=got)
+
+
+def load_tolerances(path: str | Path) -> Any:
+    """Read a ``--tolerances`` TOML file: a ``[tolerance]`` table (or its keys at the top level) →
+    ``ToleranceSpec``; errors name ``tolerance.<field>``."""
+    from lensopt.spec.tolerance import ToleranceSpec
+
+    path = Path(path)
+    if not path.is_file():
+        raise SpecError("no such file", path=str(path))
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise SpecError(f"malformed TOML: {err}", path=str(path)) from None
+    data = data.get("tolerance", data)
+    try:
+        return ToleranceSpec.model_validate(data)
+    except ValidationError as err:
+        first = err.errors()[0]
+        where = format_loc(tuple(first["loc"]))
+        raise SpecError(first["msg"], path="tolerance" + (f".{where}" if where else ""),
+                        got=first.get("input")) from None

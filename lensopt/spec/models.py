@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import math
 import re
+import typing
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from lensopt.spec.optim import OptimizeSpec
+from lensopt.spec.tolerance import ToleranceSpec
 
 __all__ = [
     "ApertureSpec",
@@ -26,6 +28,7 @@ __all__ = [
     "SensorSpec",
     "ModelGlassSpec",
     "TabulatedGlassSpec",
+    "AgfGlassSpec",
     "PlaneShape",
     "SphereShape",
     "ConicShape",
@@ -38,15 +41,41 @@ __all__ = [
     "DiffractiveSurface",
     "SurfaceSpec",
     "ImageSpec",
+    "ElementPlacementSpec",
     "LensSpec",
     "curvature_of",
 ]
+
+
+#: Largest gap or clear semi-diameter accepted, mm (1 km): beyond it a lens is a typo, and float64 ray
+#: arithmetic on 1e308 mm overflows to NaN.
+MAX_LENGTH_MM = 1e6
+_SCALARS = {float: "a valid number", int: "a valid integer", bool: "true or false"}
+
+
+def _scalar_kind(annotation: Any) -> str | None:
+    """``a number`` for float / float | None fields (likewise int, bool); None for anything else."""
+    if annotation in _SCALARS:
+        return _SCALARS[annotation]
+    args = [a for a in typing.get_args(annotation) if a is not type(None)]
+    return _SCALARS.get(args[0]) if len(args) == 1 and args[0] in _SCALARS else None
 
 
 class _Model(BaseModel):
     # Numbers must be finite (TOML accepts inf and nan); only a radius may be inf (a flat surface).
     model_config = ConfigDict(extra="forbid", validate_assignment=True, ser_json_inf_nan="constants",
                               allow_inf_nan=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_text_numbers(cls, data: Any) -> Any:
+        """``radius = "1e999"`` or ``stop = "yes"`` are typos, not numbers or flags (pydantic would coerce)."""
+        if isinstance(data, dict):
+            for name, info in cls.model_fields.items():
+                value = data.get(name)
+                if isinstance(value, str) and (kind := _scalar_kind(info.annotation)) is not None:
+                    raise ValueError(f"@{name}: must be {kind}, not text (got {value!r})")
+        return data
 
 
 # --------------------------------------------------------------------------------------- system
@@ -215,7 +244,7 @@ class SpectrumSpec(_Model):
 
 
 class SensorSpec(_Model):
-    pixel_pitch_um: float = Field(gt=0)
+    pixel_pitch_um: float = Field(gt=0, le=1e4)
     resolution: tuple[int, int] | None = None
 
     @field_validator("resolution")
@@ -258,7 +287,17 @@ class TabulatedGlassSpec(_Model):
         return self
 
 
-MaterialSpec = Annotated[str | ModelGlassSpec | TabulatedGlassSpec, Field(union_mode="left_to_right")]
+class AgfGlassSpec(_Model):
+    """A glass of a Zemax AGF catalog file: ``{ catalog = "path/to/file.agf", glass = "N-BK7" }``. A relative
+    path is taken from the working directory. Wavelengths outside the catalog's range are accepted (the
+    formula extrapolates); ``lensopt import-zemax`` warns about them."""
+
+    catalog: str = Field(min_length=1)
+    glass: str = Field(min_length=1)
+
+
+MaterialSpec = Annotated[str | ModelGlassSpec | TabulatedGlassSpec | AgfGlassSpec,
+                         Field(union_mode="left_to_right")]
 
 
 # ------------------------------------------------------------------------------- surface shapes
@@ -333,13 +372,17 @@ _VARY_RE = re.compile(r"^(radius|thickness|conic|material|coefficients|phase)(\.
 class _Interface(_Model):
     """What every surface has: the gap after it, its medium, clear aperture, stop flag, variables."""
 
-    thickness: float
+    thickness: float = Field(ge=-MAX_LENGTH_MM, le=MAX_LENGTH_MM)
     material: MaterialSpec = "air"
-    semi_diameter: float | None = Field(default=None, gt=0)
+    semi_diameter: float | None = Field(default=None, gt=0, le=MAX_LENGTH_MM)
     stop: bool = False
     clip: bool = False
     vary: list[str] = Field(default_factory=list)
     label: str | None = None
+    # Placement (lensopt.optics.placement); None = on the axis (kept out of the written JSON).
+    decenter: tuple[float, float] | None = None  # (dx, dy), mm
+    tilt_deg: tuple[float, float] | None = None  # (α about x, β about the new y), degrees
+    decenter_mode: Literal["return", "basic"] | None = None  # None: "return" (decenter-and-return)
 
     def _allowed_vary(self) -> set[str]:
         return {"thickness", "material"}
@@ -412,10 +455,53 @@ SurfaceSpec = Annotated[
 ]
 
 
+class ElementPlacementSpec(_Model):
+    """A rigid decenter (mm) and tilt (degrees: α about x, then β about the new y) of the element made of
+    surfaces ``surfaces[0]..surfaces[1]`` (0-based, inclusive), about the vertex of its first surface;
+    later surfaces stay in place (see ``lensopt.optics.placement``)."""
+
+    surfaces: tuple[int, int]
+    decenter: tuple[float, float] = (0.0, 0.0)
+    tilt_deg: tuple[float, float] = (0.0, 0.0)
+
+    @field_validator("surfaces")
+    @classmethod
+    def _order(cls, v: tuple[int, int]) -> tuple[int, int]:
+        if v[0] < 0 or v[1] < v[0]:
+            raise ValueError(f"must be [first, last] surface indices with 0 ≤ first ≤ last (got {list(v)})")
+        return v
+
+
 class ImageSpec(_Model):
     """The flat image surface after the last gap; ``defocus`` (mm) moves it along the axis."""
 
     defocus: float = 0.0
+
+
+CHECK_METRICS = {
+    "efl_mm": 1e-5, "bfl_mm": 1e-5, "fnumber": 1e-6, "ttl_mm": 1e-5, "esr_um": 1e-3, "rms_um": 1e-3,
+    "distortion_percent": 1e-4, "ri": 1e-5, "failed_rays": 0.0, "margin": 1e-3,
+}
+"""Metric families of ``lensopt check`` and their default absolute tolerances (in the metric's unit:
+mm, µm, %, a fraction, a ray count; margins in their constraint's unit). The metrics are computed with
+fixed, seeded settings, so only rounding differences across platforms must pass: a 0.01 mm change of
+one thickness or a swapped glass moves several of them far past these."""
+
+
+class CheckSpec(_Model):
+    """``[check]``: tolerances of ``lensopt check`` per metric family (absolute; see ``CHECK_METRICS``)."""
+
+    tolerances: dict[str, float] = Field(default_factory=dict)
+
+    @field_validator("tolerances")
+    @classmethod
+    def _known(cls, v: dict[str, float]) -> dict[str, float]:
+        for k, tol in v.items():
+            if k not in CHECK_METRICS:
+                raise ValueError(f"@{k}: unknown metric; one of {', '.join(CHECK_METRICS)}")
+            if not tol >= 0:
+                raise ValueError(f"@{k}: a tolerance must be ≥ 0, got {tol}")
+        return v
 
 
 class LensSpec(_Model):
@@ -428,7 +514,10 @@ class LensSpec(_Model):
     sensor: SensorSpec | None = None
     surfaces: list[SurfaceSpec] = Field(min_length=1)
     image: ImageSpec = Field(default_factory=ImageSpec)
+    elements: list[ElementPlacementSpec] | None = None
     optimize: OptimizeSpec | None = None
+    tolerance: ToleranceSpec | None = None
+    check: CheckSpec | None = None
 
     @model_validator(mode="after")
     def _structure(self) -> LensSpec:
@@ -438,6 +527,10 @@ class LensSpec(_Model):
         if len(stops) > 1:
             raise ValueError(f"@surfaces[{stops[1]}].stop: stop = true on several surfaces {stops}; "
                              "exactly one is the aperture stop")
+        for i, el in enumerate(self.elements or []):
+            if el.surfaces[1] >= len(self.surfaces):
+                raise ValueError(f"@elements[{i}].surfaces: last surface {el.surfaces[1]} is beyond the "
+                                 f"{len(self.surfaces)} surfaces")
         return self
 
     @property

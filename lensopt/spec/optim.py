@@ -60,8 +60,8 @@ class SolveSpec(_Model):
     def _fields(self) -> SolveSpec:
         if self.type in ("efl", "image_height", "ttl") and self.value is None:
             raise ValueError(f"@value: a {self.type} solve needs a target value")
-        if self.type in ("efl", "image_height", "ttl") and not (self.value is not None and self.value > 0):
-            raise ValueError(f"@value: must be positive (got {self.value})")
+        if self.type in ("efl", "image_height", "ttl") and not (self.value is not None and 0 < self.value <= 1e6):
+            raise ValueError(f"@value: must be positive and at most 1e6 mm (got {self.value})")
         if self.type in ("ttl", "focus") and self.surface is not None:
             raise ValueError(f"@surface: a {self.type} solve acts on the last airspace; leave surface out")
         if self.type == "focus" and self.value is not None:

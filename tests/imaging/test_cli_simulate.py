@@ -48,7 +48,7 @@ def test_simulate_writes_an_image_and_reports_stages(tmp_path: Path) -> None:
     assert 20 < res["metrics"]["psnr_db"] < 60 and not np.array_equal(back, img[:100, :150, :1])
     r2 = runner.invoke(app, ["simulate", COOKE, str(small), "-o", str(out), "--region", "corner", "--rays",
                              "rings:8"])
-    assert r2.exit_code == 0 and "plan — Cooke triplet" in r2.stdout and "wrote" in r2.stdout
+    assert r2.exit_code == 0 and "plan — Cooke triplet" in r2.stdout and "wrote" in r2.stderr
     assert "PSNR" not in r2.stdout  # scored only when asked (--score or --reference)
     r3 = runner.invoke(app, ["simulate", COOKE, str(small), "-o", str(out), "--region", "corner", "--rays",
                              "rings:8", "--json"])

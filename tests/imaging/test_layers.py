@@ -27,6 +27,9 @@ KNOWN = {
     ("optim", "spec"),
     # CODE V import/export turns files into specs and back (spec is its data model).
     ("io", "spec"),
+    # tolerance.setup expands a spec's [tolerance] items against the built model and writes the worst
+    # trials back as specs (tolerance.model/run/evaluate, the Monte Carlo core, take tensors only).
+    ("tolerance", "spec"),
 }
 
 

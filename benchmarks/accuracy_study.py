@@ -1,0 +1,178 @@
+"""Issue 13 measurements: ``lensopt accuracy`` on the Cooke triplet and the C-mount lens, the 1 %-ESR
+recommendation checked on a third lens, and the wall time of the ray-heavy commands per trace backend.
+
+    .venv/bin/python benchmarks/accuracy_study.py [--part accuracy,third,commands] [--repeats 3]
+
+Part ``accuracy`` writes benchmarks/results_accuracy_<lens>.json and benchmarks/accuracy_<lens>.png (the
+plot ``lensopt accuracy -o`` draws) and prints markdown tables. Part ``third`` takes each lens's
+recommended setting for a 1 % ESR target and measures its ESR error on specs/double_gauss.toml against
+that lens's own converged reference. Part ``commands`` runs ``lensopt trace --sampling rings:32``,
+``lensopt plot psf`` and ``lensopt simulate`` on the shipped lenses as separate processes (what a user
+waits for, imports and compilation included) with ``--backend eager`` (before: every command traced
+eagerly), the default ``auto``, and ``compiled`` (twice: the second run finds Inductor's on-disk cache).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from lensopt.optics.backend import use_backend
+from lensopt.optics.bundle import trace_bundle
+from lensopt.optics.sampling import PupilSampling
+from lensopt.plot.accuracy import accuracy_figure
+from lensopt.plot.style import save_figure
+from lensopt.qa.accuracy import DEFAULT_KNOBS, _cast, run_accuracy, spot_reference, weighted_spot
+from lensopt.spec import build, load_spec
+
+ROOT = Path(__file__).resolve().parents[1]
+BENCH = ROOT / "benchmarks"
+LENSES = {"cooke": ROOT / "specs" / "cooke_triplet.toml", "cmount": ROOT / "lenses" / "cmount_4p.json"}
+THIRD = ROOT / "specs" / "double_gauss.toml"
+
+
+def part_accuracy(repeats: int) -> dict:
+    out = {}
+    for key, path in LENSES.items():
+        model = build(load_spec(path))
+        t0 = time.perf_counter()
+        res = run_accuracy(model, knobs=DEFAULT_KNOBS, repeats=repeats)
+        data = res.as_json(0.01, 0.05)
+        data["wall_s"] = time.perf_counter() - t0
+        data["load"] = os.getloadavg()
+        (BENCH / f"results_accuracy_{key}.json").write_text(json.dumps(data, indent=1))
+        save_figure(accuracy_figure(data, title=model.spec.name), BENCH / f"accuracy_{key}.png", dpi=120)
+        out[key] = data
+        print(f"\n### {model.spec.name} ({path.relative_to(ROOT)}), {data['wall_s']:.0f} s, load {data['load']}\n")
+        ref = data["reference"]["spot"]
+        print(f"spot reference: ESR {ref['esr_um']:.9f} µm, {ref['nodes']}, last doubling {ref['agreement']:.1e}; "
+              f"compile {data['compile_s']}")
+        print("\n| knob | setting | ESR err | RMS err | aim err | PSF NRMSE | image RMSE | time s |")
+        print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+        for p in data["points"]:
+            e = p["errors"]
+            cells = " | ".join(f"{e[m]:.2e}" if m in e else "" for m in ("esr", "rms", "aim", "psf", "sim"))
+            print(f"| {p['knob']} | {p['setting']} | {cells} | {p['time_s']:.4f} |")
+        for m, r in data["recommendation"].items():
+            c = r["cheapest"]
+            print(f"- {m} ≤ 1 %: " + (f"{c['setting']} ({c['errors'][m]:.2e}, {c['time_s']:.4f} s)" if c
+                                      else r.get("why_not", "")))
+    return out
+
+
+def esr_error(model, setting: str) -> tuple[float, float]:  # type: ignore[no-untyped-def]
+    """ESR relative error of ``setting`` ('grid:24', 'rings:16 float32', 'rings:8 compiled') and the
+    reference's convergence."""
+    words = setting.split()
+    ps = PupilSampling.parse(words[0])
+    lens = _cast(model.lens, torch.float32) if "float32" in words else model.lens
+    ref = spot_reference(model)
+    with torch.no_grad(), use_backend("compiled" if "compiled" in words else "eager"):
+        pts = ps.points(dtype=lens.dtype)
+        b = trace_bundle(lens, model.system, pts, half_pupil=ps.half)
+        fw = torch.tensor(model.system.field_weights, dtype=lens.dtype) if model.system.field_weights else None
+        esr, _ = weighted_spot(b, torch.ones(pts.shape[0], dtype=lens.dtype),
+                               model.system.wavelength_weights.to(lens.dtype), fw)
+    return abs(1e3 * float(esr) - ref["esr_um"]) / ref["esr_um"], ref["agreement"]
+
+
+def part_third(results: dict) -> None:
+    third = build(load_spec(THIRD))
+    print(f"\n### 1 % ESR recommendation checked on {THIRD.relative_to(ROOT)}\n")
+    print("| recommended on | setting | its error there | error on the third lens | meets 1 %? |")
+    print("| --- | --- | --- | --- | --- |")
+    for key, data in results.items():
+        c = data["recommendation"]["esr"]["cheapest"]
+        err, agree = esr_error(third, c["setting"])
+        print(f"| {key} | {c['setting']} | {c['errors']['esr']:.2e} | {err:.2e} (reference converged to {agree:.0e}) "
+              f"| {'yes' if err <= 0.01 else 'no'} |")
+
+
+def part_commands(repeats: int) -> None:
+    py = [sys.executable, "-c", "from lensopt.cli import app; app()"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "2")}
+    tmp = ROOT / "out" / "accuracy_study"
+    tmp.mkdir(parents=True, exist_ok=True)
+    img = ROOT / "lensopt" / "imaging" / "data" / "coffee.png"
+    rows = []
+    for lens in sorted((ROOT / "lenses").glob("*.json")):
+        if lens.name == "check_baseline.json":
+            continue
+        cmds = {"trace rings:32": ["trace", str(lens), "--sampling", "rings:32", "--json"],
+                "trace rings:64": ["trace", str(lens), "--sampling", "rings:64", "--json"],
+                "plot psf": ["plot", "psf", str(lens), "-o", str(tmp / "psf.png")],
+                "simulate": ["simulate", str(lens), str(img), "--region", "corner", "-o", str(tmp / "sim.png")]}
+        for name, args in cmds.items():
+            times: dict[str, list[float]] = {}
+            for _ in range(repeats):  # interleaved: every backend sees the same load
+                for backend in ("eager", "auto", "compiled"):
+                    t0 = time.perf_counter()
+                    r = subprocess.run([*py, *args, "--backend", backend], env=env, capture_output=True, text=True)
+                    dt = time.perf_counter() - t0
+                    if r.returncode != 0:
+                        raise SystemExit(f"{name} {lens.name} {backend}: {r.stderr[-500:]}")
+                    times.setdefault(backend, []).append(dt)
+            rows.append((lens.name, name, times))
+            med = {b: float(np.median(v)) for b, v in times.items()}
+            auto = f"{med['auto']:.2f} ({med['auto'] / med['eager']:.2f}×)"
+            print(f"| {lens.name} | {name} | {med['eager']:.2f} | {auto} "
+                  f"| {med['compiled']:.2f} ({med['compiled'] / med['eager']:.2f}×) | "
+                  f"{', '.join(f'{t:.1f}' for t in times['compiled'])} |", flush=True)
+    (BENCH / "results_backend_commands.json").write_text(json.dumps(
+        {"rows": [{"lens": a, "command": b, "times_s": c} for a, b, c in rows], "load": os.getloadavg()}, indent=1))
+
+
+def part_illumination(grid: int) -> None:
+    """The flux-counting illumination reference (millions of rays in 2 M-ray tiles) per backend, in process."""
+    from lensopt.analysis.irradiance import relative_illumination_flux
+    from lensopt.optics import backend
+
+    model = build(load_spec(ROOT / "specs" / "wide_angle_laikin.toml"))
+    print(f"\n### relative_illumination_flux, specs/wide_angle_laikin.toml, grid {grid}, spec fields\n")
+    print("| backend | s | RI per field |")
+    print("| --- | --- | --- |")
+    base = None
+    for name in ("eager", "auto", "compiled", "auto"):
+        backend.reset_auto_counts()
+        t0 = time.perf_counter()
+        with use_backend(name):
+            r = relative_illumination_flux(model.lens, model.system, model.system.rel_field, grid=grid)
+        dt = time.perf_counter() - t0
+        ri = r.relative_illumination if hasattr(r, "relative_illumination") else r
+        vals = [float(v) for v in torch.as_tensor(ri).flatten()]
+        base = base or vals
+        diff = max(abs(a - b) for a, b in zip(vals, base, strict=True))
+        print(f"| {name} | {dt:.1f} | {', '.join(f'{v:.6f}' for v in vals)} (max diff to eager {diff:.1e}) |",
+              flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--part", default="accuracy,third,commands")
+    ap.add_argument("--repeats", type=int, default=3)
+    a = ap.parse_args()
+    parts = a.part.split(",")
+    torch.set_num_threads(int(os.environ.get("OMP_NUM_THREADS", "2")))
+    print(f"load before: {os.getloadavg()}")
+    results = part_accuracy(a.repeats) if "accuracy" in parts or "third" in parts else {}
+    if "third" in parts:
+        part_third(results)
+    if "commands" in parts:
+        print("\n| lens | command | eager s (before) | auto s (default) | compiled s | compiled runs |")
+        print("| --- | --- | --- | --- | --- | --- |")
+        part_commands(a.repeats)
+    if "illumination" in parts:
+        part_illumination(401)
+    print(f"load after: {os.getloadavg()}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,254 @@
+"""What every ``lensopt`` command shares (CLI layer): the consoles, option aliases, the error contract
+and signals. Light on purpose: nothing here imports torch, so ``lensopt --help`` starts fast.
+
+The contract (README, "Errors and exit codes"): 0 success; 2 a problem the user can fix, printed as one
+line ``error: path.to.field: what is wrong (got X)`` (bad input, usage errors, output paths, memory
+budget); 130 Ctrl-C (SIGINT); 143 SIGTERM; 70 an internal error (a bug: one line, ``--verbose`` shows
+the traceback). Never a traceback without ``--verbose``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import json
+import logging
+import math
+import os
+import signal
+import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Annotated, Any, TypeVar
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+from typer.core import TyperGroup
+
+try:  # typer ≥ 0.20 vendors click
+    from typer._click import exceptions as click_exc
+except ImportError:  # pragma: no cover
+    from click import exceptions as click_exc  # type: ignore[no-redef]
+
+from lensopt.errors import LensoptError
+
+__all__ = ["AimOpt", "AimStepsOpt", "EX_INTERNAL", "JsonOpt", "LensArg", "SamplingOpt", "SeedOpt",
+           "Terminated", "check_output", "console", "err_console", "handle_errors", "LensoptGroup",
+           "report_signal", "signals_deferred", "state", "print_json", "LowerLevelFormatter"]
+
+EX_USAGE, EX_INTERNAL, EX_SIGINT, EX_SIGTERM = 2, 70, 130, 143
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that every ``except KeyboardInterrupt`` keeps the best state."""
+
+
+class _State:
+    verbose = False
+    signal_exit = EX_SIGINT  # the exit code of the last signal received
+    signal_reported = False  # its one line is printed
+
+
+state = _State()
+
+
+# Wide enough for tables when the stream is a pipe or a file (rich would assume 80 columns).
+console = Console(width=None if sys.stdout.isatty() else 160)
+err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 1000)
+
+
+def _check_seed(value: int | None) -> int | None:
+    if value is not None and not 0 <= value < 2**63:
+        raise typer.BadParameter(f"must be an integer from 0 to 2**63 - 1 (got {value})")
+    return value
+
+
+LensArg = Annotated[Path, typer.Argument(help="Lens spec (.toml) or resolved lens (.json).", show_default=False)]
+SamplingOpt = Annotated[str, typer.Option("--sampling", help="Pupil sampling: rings:N[:nojitter] or grid:N.")]
+AimOpt = Annotated[str | None, typer.Option("--aim", help="Ray aiming: none | chief | full (default: the spec's).")]
+AimStepsOpt = Annotated[int | None, typer.Option("--aim-steps",
+                                                 help="Newton steps of full aiming (default: the spec's).")]
+SeedOpt = Annotated[int, typer.Option("--seed", callback=_check_seed,
+                                      help="Seed of every random draw (pupil jitter), 0 to 2**63 - 1.")]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object instead of tables.")]
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def error_line(message: str) -> None:
+    """``error: message`` as one line on stderr (no markup, no wrapping)."""
+    err_console.print(f"[bold red]error:[/] {escape(_one_line(message))}", markup=True, highlight=False, soft_wrap=True,
+                      emoji=False)
+
+
+def handle_errors(fn: F) -> F:
+    """Lensopt errors → one line, exit 2; Ctrl-C → 130 and SIGTERM → 143 with one line; anything else
+    (a bug) → one line, exit 70 (``--verbose`` re-raises it with its traceback)."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except (typer.Exit, typer.Abort, click_exc.ClickException):
+            raise
+        except LensoptError as err:
+            error_line(str(err))
+            raise typer.Exit(EX_USAGE) from None
+        except KeyboardInterrupt:
+            raise typer.Exit(report_signal()) from None
+        except RecursionError:
+            error_line("input nested too deeply")
+            raise typer.Exit(EX_USAGE) from None
+        except MemoryError:
+            error_line("out of memory; lower the sampling, image size or grid (see --max-memory)")
+            raise typer.Exit(EX_USAGE) from None
+        except BrokenPipeError:
+            raise typer.Exit(0) from None
+        except Exception as err:
+            if state.verbose:
+                raise
+            error_line(f"internal error ({type(err).__name__}: {err}); please report it, with the command and "
+                       "input; --verbose shows the traceback")
+            raise typer.Exit(EX_INTERNAL) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+# ------------------------------------------------------------------------------------- signals
+
+
+def report_signal(line: str | None = None) -> int:
+    """Print the one line for the signal received (once) and return its exit code (130 or 143)."""
+    if not state.signal_reported:
+        state.signal_reported = True
+        text = line or ("terminated" if state.signal_exit == EX_SIGTERM else "interrupted")
+        err_console.print(text, highlight=False, markup=False, soft_wrap=True)
+    return state.signal_exit
+
+
+def _on_sigterm(signum: int, frame: Any) -> None:
+    state.signal_exit = EX_SIGTERM
+    raise Terminated()
+
+
+def _on_sigint(signum: int, frame: Any) -> None:
+    state.signal_exit = EX_SIGINT
+    raise KeyboardInterrupt()
+
+
+@contextlib.contextmanager
+def _signal_handlers() -> Iterator[None]:
+    """SIGINT → KeyboardInterrupt, SIGTERM → Terminated (a KeyboardInterrupt) while a command runs."""
+    try:
+        old = {s: signal.signal(s, h) for s, h in ((signal.SIGINT, _on_sigint), (signal.SIGTERM, _on_sigterm))}
+    except ValueError:  # not the main thread (an embedding application): leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+@contextlib.contextmanager
+def signals_deferred() -> Iterator[None]:
+    """Block SIGINT and SIGTERM (delivered on exit from the block), e.g. while writing the result."""
+    sigs = {signal.SIGINT, signal.SIGTERM}
+    try:
+        signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
+    except (ValueError, AttributeError, OSError):  # pragma: no cover
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, sigs)
+
+
+class LensoptGroup(TyperGroup):
+    """The top-level command group: usage errors as one line, signals, exit codes (see the module doc)."""
+
+    def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
+             standalone_mode: bool = True, **extra: Any) -> Any:
+        code = 0
+        state.signal_exit, state.signal_reported, state.verbose = EX_SIGINT, False, False
+        try:
+            with _signal_handlers():
+                rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+            code = rv if isinstance(rv, int) else 0
+            if code == EX_SIGINT:  # typer turns a KeyboardInterrupt outside the commands into exit 130
+                code = report_signal()
+        except getattr(click_exc, "NoArgsIsHelpError", ()) as err:
+            err.show()
+            code = err.exit_code
+        except click_exc.ClickException as err:
+            hint = ""
+            ctx = getattr(err, "ctx", None)
+            if ctx is not None and isinstance(err, click_exc.UsageError):
+                hint = f" (see {ctx.command_path} --help)"
+            error_line(err.format_message() + hint)
+            code = err.exit_code
+        except (KeyboardInterrupt, typer.Abort):
+            code = report_signal()
+        except typer.Exit as err:
+            code = err.exit_code
+        if not standalone_mode:
+            return code
+        sys.exit(code)
+
+
+# ---------------------------------------------------------------------------------- output paths
+
+
+def check_output(path: Path, suffixes: tuple[str, ...] | None = None, *, option: str = "--output",
+                 what: str = "file") -> Path:
+    """Check before any work that ``path`` can be written: a supported suffix, not a directory, an existing
+    writable parent folder. Raises one ``LensoptError`` naming ``option``."""
+    if suffixes is not None and path.suffix.lower() not in suffixes:
+        names = ", ".join(suffixes[:-1]) + (" or " if len(suffixes) > 1 else "") + suffixes[-1]
+        article = "an" if what[0] in "aeiou" else "a"
+        raise LensoptError(f"expected {article} {what} name ending in {names}", path=option, got=str(path))
+    if path.is_dir():
+        raise LensoptError("is a directory; give a file name", path=option, got=str(path))
+    parent = path.parent if str(path.parent) else Path(".")
+    probe = parent
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise LensoptError(f"{probe} is a file, not a folder", path=option, got=str(path))
+    if not os.access(probe, os.W_OK | os.X_OK) or _is_pseudo_fs(probe):
+        raise LensoptError(f"cannot write in {probe} (permission denied or read-only)", path=option, got=str(path))
+    return path
+
+
+def _is_pseudo_fs(folder: Path) -> bool:
+    """/proc and /sys say writable but refuse new files."""
+    parts = folder.resolve().parts
+    return len(parts) > 1 and parts[1] in ("proc", "sys")
+
+
+def _clean(obj: Any) -> Any:
+    """JSON-safe numbers: NaN/inf → null (the reason is elsewhere in the object); finite floats unchanged."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_clean(v) for v in obj]
+    return obj
+
+
+def print_json(obj: Any) -> None:
+    sys.stdout.write(json.dumps(_clean(obj), indent=2, allow_nan=False) + "\n")
+
+
+class LowerLevelFormatter(logging.Formatter):
+    """Log records as one plain line, ``warning: message``."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        return " ".join(super().format(record).split()).replace(record.levelname, record.levelname.lower(), 1)

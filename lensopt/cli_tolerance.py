@@ -1,0 +1,288 @@
+"""``lensopt tolerance`` and ``lensopt plot mtf`` (CLI layer: parse, call the library, render).
+
+Registered from the bottom of ``lensopt.cli`` by ``register(app, plot_app)``.
+"""
+
+
+import math
+import time
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.table import Table
+
+from lensopt.errors import LensoptError
+
+__all__ = ["register", "mtf_report", "tolerance_report"]
+
+_METRIC_UNITS = {"esr": "µm", "rms": "µm", "mtf": "", "distortion": "%"}
+
+
+def mtf_report(model: Any, frequencies: list[float], *, method: str = "heuristic",
+               sampling: str = "rings:32") -> dict[str, Any]:
+    """MTF per field at ``frequencies`` (cycles/mm) as plain data (for ``trace --json --mtf``)."""
+    import torch
+
+    from lensopt.analysis.mtf import MTF_METHODS, lens_mtf
+
+    if method not in MTF_METHODS:
+        raise LensoptError(f"must be one of {', '.join(MTF_METHODS)}", path="--mtf-method", got=method)
+    if not frequencies or any(not (f >= 0 and math.isfinite(f)) for f in frequencies):
+        raise LensoptError("expected non-negative frequencies in cycles/mm, comma-separated", path="--mtf",
+                           got=frequencies)
+    nu = torch.tensor(frequencies, dtype=model.lens.dtype)
+    r = lens_mtf(model.lens, model.system, nu, method=method, sampling=sampling)
+    return {"method": method, "frequencies_per_mm": frequencies, "cutoff_per_mm": r.cutoff,
+            "rel_field": r.rel_field.tolist(), "sagittal": r.sagittal.tolist(), "tangential": r.tangential.tolist()}
+
+
+def parse_frequencies(text: str, path: str) -> list[float]:
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise LensoptError("expected comma-separated numbers (cycles/mm)", path=path, got=text) from None
+
+
+def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, workers: int, out_dir: Path | None,
+                     worst: int, inverse_delta: float | None, sensitivity: bool = True) -> dict[str, Any]:
+    """Run sensitivity and Monte Carlo; write plots and worst trials under ``out_dir``; plain data."""
+    import torch
+
+    from lensopt.spec.io import save_json
+    from lensopt.tolerance.run import (
+        HIGHER_IS_BETTER,
+        monte_carlo,
+        nominal_metrics,
+        rss_prediction,
+        scalar_metric,
+    )
+    from lensopt.tolerance.run import sensitivity as run_sensitivity
+    from lensopt.tolerance.setup import make_job, trial_spec
+
+    job = make_job(model, settings)
+    unit = _METRIC_UNITS[job.metric]
+    nominal = nominal_metrics(job)
+    m0 = float(scalar_metric(nominal, job.metric)[0])
+    report: dict[str, Any] = {
+        "lens": model.spec.name, "metric": job.metric, "unit": unit, "higher_is_better": HIGHER_IS_BETTER[job.metric],
+        "sampling": settings.sampling, "compensator": settings.compensator, "seed": settings.seed,
+        "nominal": {"value": m0, "focus_shift_mm": float(nominal["focus_shift"][0]),
+                    "esr_um": float(nominal["esr"][0] * 1e3)},
+        "tolerances": [{"name": t.name, "kind": t.kind, "target": t.target, "limit": t.limit,
+                        "distribution": t.distribution} for t in job.tols],
+    }
+    rows: list[Any] = []
+    if sensitivity:
+        rows, target = run_sensitivity(job, nominal, target=inverse_delta, scheduler=None)
+        report["sensitivity"] = [{"name": r.name, "kind": r.kind, "limit": r.limit, "minus": r.minus, "plus": r.plus,
+                                  "focus_minus_mm": r.focus_minus, "focus_plus_mm": r.focus_plus,
+                                  "inverse": r.inverse, "failed_rays": r.failed_rays} for r in rows]
+        report["inverse_target"] = target
+        report["rss"] = rss_prediction(rows, job.tols, m0)
+    if settings.trials > 0:
+        start = time.perf_counter()
+        mc = monte_carlo(job, settings.trials, settings.seed, scheduler=scheduler, workers=workers)
+        elapsed = time.perf_counter() - start
+        per = {k: _describe(v) for k, v in mc.metrics.items() if v.ndim == 1 and k != "compensator_ok"}
+        report["monte_carlo"] = {"trials": mc.num_trials, "seconds": elapsed,
+                                 "seconds_per_trial": elapsed / mc.num_trials,
+                                 "scheduler": scheduler or "serial", "stats": mc.stats, "yields": mc.yields,
+                                 "metrics": per}
+        if out_dir is not None:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            saved = []
+            for rank, k in enumerate(mc.worst(worst)):
+                params = job.params(torch.from_numpy(mc.values[k:k + 1]))
+                offsets = mc.metrics["lm_offsets"][k] if "lm_offsets" in mc.metrics else None
+                spec = trial_spec(model, params, float(mc.metrics["focus_shift"][k]),
+                                  name=f"{model.spec.name} — tolerance trial {k} (rank {rank + 1} worst)",
+                                  lm_vars=job.setup.lm_vars, lm_offsets=offsets)
+                path = out_dir / f"worst_{rank + 1}_trial_{k}.json"
+                save_json(spec, path)
+                saved.append({"trial": k, "value": float(mc.scalar[k]), "path": str(path)})
+            report["worst"] = saved
+            _plots(out_dir, report, mc, rows, job.metric, unit, model.spec.name)
+    elif out_dir is not None and rows:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        _plots(out_dir, report, None, rows, job.metric, unit, model.spec.name)
+    return report
+
+
+def _describe(v: Any) -> dict[str, float]:
+    import numpy as np
+
+    v = np.asarray(v, dtype=float)
+    f = v[np.isfinite(v)]
+    if f.size == 0:
+        return {"mean": math.inf, "std": 0.0, "min": math.inf, "max": math.inf}
+    return {"mean": float(f.mean()), "std": float(f.std(ddof=1)) if f.size > 1 else 0.0, "min": float(v.min()),
+            "max": float(v.max())}
+
+
+def _plots(out_dir: Path, report: dict[str, Any], mc: Any, rows: list[Any], metric: str, unit: str,
+           name: str) -> None:
+    from lensopt.plot.style import save_figure
+    from lensopt.plot.tolerance import cdf_figure, histogram_figure, sensitivity_figure
+
+    label = f"{metric} ({unit})" if unit else metric
+    files = []
+    if mc is not None:
+        rss = report.get("rss")
+        pred = (rss["mean"], rss["std"]) if rss else None
+        m0 = report["nominal"]["value"]
+        save_figure(cdf_figure(mc.scalar, metric=label, nominal=m0, title=name, predicted=pred), out_dir / "cdf.png")
+        save_figure(histogram_figure(mc.scalar, metric=label, nominal=m0, title=name), out_dir / "histogram.png")
+        files += ["cdf.png", "histogram.png"]
+    if rows:
+        save_figure(sensitivity_figure([r.name for r in rows], [r.minus for r in rows], [r.plus for r in rows],
+                                       metric=label, title=name), out_dir / "sensitivity.png")
+        files.append("sensitivity.png")
+    report["plots"] = [str(out_dir / f) for f in files]
+
+
+def _render(console: Any, r: dict[str, Any], top: int = 15) -> None:
+    unit = r["unit"]
+    console.print(f"[bold]{r['lens']}[/] — metric {r['metric']} {unit}, compensator {r['compensator']}, "
+                  f"sampling {r['sampling']}; nominal {r['nominal']['value']:.4f} "
+                  f"(focus shift {r['nominal']['focus_shift_mm'] * 1e3:+.1f} µm), {len(r['tolerances'])} tolerances")
+    if "sensitivity" in r:
+        t = Table(title=f"Sensitivity (Δ {r['metric']} at ∓limit), inverse for Δ = {r['inverse_target']:.4g}")
+        for col in ("tolerance", "limit", "Δ at −", "Δ at +", "inverse ±", "focus ± (µm)"):
+            t.add_column(col, justify="right" if col != "tolerance" else "left")
+        for s in r["sensitivity"][:top]:
+            t.add_row(s["name"], f"{s['limit']:g}", f"{s['minus']:+.4f}", f"{s['plus']:+.4f}",
+                      "∞" if math.isinf(s["inverse"]) else f"{s['inverse']:.4g}",
+                      f"{s['focus_minus_mm'] * 1e3:+.1f}/{s['focus_plus_mm'] * 1e3:+.1f}")
+        console.print(t)
+        rss = r["rss"]
+        console.print(f"RSS prediction: mean {rss['mean']:.4f}, std {rss['std']:.4f}, 90 % ≤ {rss['p90']:.4f}; "
+                      f"classical RSS {rss['rss_worst']:.4f}")
+    if "monte_carlo" in r:
+        mc = r["monte_carlo"]
+        st = mc["stats"]
+        console.print(f"Monte Carlo: {mc['trials']} trials ({mc['scheduler']}), {mc['seconds_per_trial']:.4f} s/trial; "
+                      f"mean {st['mean']:.4f}, std {st['std']:.4f}, min {st['min']:.4f}, max {st['max']:.4f}; "
+                      f"trials with failed rays {st['trials_with_failed_rays']}, "
+                      f"compensator failures {st['compensator_failures']}")
+        t = Table(title="Yield: this fraction of lenses is at least as good as")
+        for col in ("yield", f"{r['metric']} {unit}", "95 % CI"):
+            t.add_column(col, justify="right")
+        for y in mc["yields"]:
+            t.add_row(f"{100 * y['level']:.0f} %", f"{y['value']:.4f}", f"{y['ci_low']:.4f} – {y['ci_high']:.4f}")
+        console.print(t)
+    for w in r.get("worst", []):
+        console.print(f"worst trial {w['trial']}: {w['value']:.4f} → {w['path']}")
+
+
+def register(app: typer.Typer, plot_app: typer.Typer) -> None:
+    """Add ``tolerance`` to ``app`` and ``mtf`` to ``plot_app``."""
+    from lensopt.cli import (
+        DpiOpt,
+        JsonOpt,
+        LensArg,
+        OutOpt,
+        SamplingOpt,
+        _check_output,
+        _titles,
+        console,
+        err_console,
+        handle_errors,
+        load_model,
+        print_json,
+    )
+
+    @app.command("tolerance")
+    @handle_errors
+    def tolerance_cmd(
+        lens: LensArg,
+        tolerances: Annotated[Path | None, typer.Option("--tolerances", help="TOML file with a [tolerance] "
+                                                        "table (default: the spec's [tolerance]).")] = None,
+        profile: Annotated[str | None, typer.Option("--profile", help="Named tolerance set: s6.2.")] = None,
+        trials: Annotated[int | None, typer.Option("--trials", min=0, help="Monte-Carlo trials (0: none).")] = None,
+        seed: Annotated[int | None, typer.Option("--seed", help="Seed of the draws and the pupil jitter.")] = None,
+        metric: Annotated[str | None, typer.Option("--metric", help="esr | rms | mtf | distortion.")] = None,
+        mtf_frequency: Annotated[float | None, typer.Option("--mtf-frequency", help="cycles/mm of the MTF "
+                                                            "metric.")] = None,
+        sampling: Annotated[str | None, typer.Option("--sampling", help="Pupil sampling per trial.")] = None,
+        compensator: Annotated[str | None, typer.Option("--compensator", help="focus | lm | none (lm: "
+                                                        "the spec's variables by a few LM steps).")] = None,
+        scheduler: Annotated[str, typer.Option("--scheduler", help="local (a 2-worker Dask LocalCluster), "
+                                               "serial, or a Dask scheduler address.")] = "local",
+        workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="LocalCluster workers.")] = 2,
+        output_dir: Annotated[Path | None, typer.Option("--output-dir", "-o", help="Folder for plots (CDF, "
+                                                        "histogram, sensitivity) and the worst trials.")] = None,
+        worst: Annotated[int, typer.Option("--worst", min=0, max=100, help="Worst trials saved as lens JSON.")] = 3,
+        inverse_delta: Annotated[float | None, typer.Option("--inverse-delta", help="Metric change of the "
+                                                            "inverse sensitivity (default 10 % of nominal).")] = None,
+        no_sensitivity: Annotated[bool, typer.Option("--no-sensitivity", help="Skip the sensitivity table.")] = False,
+        as_json: JsonOpt = False,
+    ) -> None:
+        """Tolerancing: sensitivity table, inverse sensitivity, RSS prediction, Monte Carlo with yields,
+        back-focus compensator; plots and worst trials with --output-dir."""
+        from lensopt.spec.io import load_tolerances
+        from lensopt.spec.tolerance import ToleranceSpec
+
+        model = load_model(lens)
+        base = load_tolerances(tolerances) if tolerances is not None else model.spec.tolerance
+        if base is None:
+            if profile is None:
+                raise LensoptError("the lens has no [tolerance] section; give --tolerances FILE or --profile s6.2",
+                                   path="--tolerances")
+            base = ToleranceSpec(profile="s6.2")
+        changes = {k: v for k, v in {"profile": profile, "trials": trials, "seed": seed, "metric": metric,
+                                     "mtf_frequency": mtf_frequency, "sampling": sampling,
+                                     "compensator": compensator}.items() if v is not None}
+        try:
+            settings = ToleranceSpec.model_validate({**base.model_dump(), **changes})
+        except Exception as err:  # pydantic ValidationError → one line naming the option
+            first = err.errors()[0] if hasattr(err, "errors") else {"loc": (), "msg": str(err)}
+            where = "--" + str(first["loc"][0]).replace("_", "-") if first["loc"] else "--tolerances"
+            raise LensoptError(first["msg"], path=where) from None
+        sched = None if scheduler == "serial" else scheduler
+        report = tolerance_report(model, settings, scheduler=sched, workers=workers, out_dir=output_dir,
+                                  worst=worst, inverse_delta=inverse_delta, sensitivity=not no_sensitivity)
+        if as_json:
+            print_json(report)
+        else:
+            _render(console, report)
+
+    @plot_app.command("mtf")
+    @handle_errors
+    def plot_mtf_cmd(
+        lens: LensArg,
+        output: OutOpt,
+        method: Annotated[str, typer.Option("--method", help="heuristic | geometric | reference.")] = "heuristic",
+        max_frequency: Annotated[float | None, typer.Option("--max-frequency", help="cycles/mm (default: "
+                                                            "the diffraction cutoff).")] = None,
+        points: Annotated[int, typer.Option("--points", min=2, max=401, help="Frequencies plotted.")] = 41,
+        sampling: SamplingOpt = "rings:32",
+        dpi: DpiOpt = 150,
+    ) -> None:
+        """Sagittal and tangential MTF against frequency for every field of the lens."""
+        import torch
+
+        from lensopt.analysis.mtf import MTF_METHODS, diffraction_limited_mtf, lens_mtf
+        from lensopt.optics.paraxial import first_order
+        from lensopt.plot.mtf import mtf_figure
+        from lensopt.plot.style import save_figure
+
+        out = _check_output(output)
+        if method not in MTF_METHODS:
+            raise LensoptError(f"must be one of {', '.join(MTF_METHODS)}", path="--method", got=method)
+        model = load_model(lens)
+        fo = first_order(model.lens, model.system)
+        wn = float(fo.working_fnumber)
+        ref_um = float(model.lens.wavelength_um[model.system.reference])
+        top = max_frequency or 1.0 / (float(model.lens.wavelength_um.min()) * 1e-3 * abs(wn))
+        if not top > 0:
+            raise LensoptError("must be positive", path="--max-frequency", got=max_frequency)
+        nu = torch.linspace(0.0, top, points, dtype=model.lens.dtype)
+        res = lens_mtf(model.lens, model.system, nu, method=method, sampling=sampling)
+        field_deg = None
+        if model.system.field_type == "angle":
+            field_deg = [r * model.system.field_max for r in model.system.rel_field]
+        title, sub = _titles(model)
+        limit = diffraction_limited_mtf(nu, ref_um, wn).numpy()
+        save_figure(mtf_figure(res, title=title, subtitle=sub, field_deg=field_deg, limit=limit), out, dpi=dpi)
+        err_console.print(f"wrote {output}")

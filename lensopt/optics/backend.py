@@ -1,0 +1,181 @@
+"""Which trace runs: the eager ``trace`` or the ``torch.compile``-d ``compiled_trace``.
+
+Both give the same ``RayTrace`` (to ~1e-14 mm; tests hold them to 1e-12 mm). They differ in cost:
+
+- eager: no start-up, ≈ 0.5 µs per ray and surface loop in float64 on these 2-core machines;
+- compiled: 3–7× faster per ray, but the first call per lens *structure* in a process pays the
+  compilation: tens of seconds the very first time, ≈ 5 s in a later process that finds Inductor's
+  kernels in its on-disk cache (``TORCHINDUCTOR_CACHE_DIR``, default ``/tmp/torchinductor_$USER``).
+
+``auto`` (the default) therefore works like renting skis: it traces eagerly until the rays traced
+for one lens structure in this process (``AUTO_MIN_RAYS``, ≈ 5 s of eager work) would have paid for
+a compilation, then compiles. A call inside a forward-mode transform (``torch.func.jacfwd``,
+``vmap``, dual tensors: the LM Jacobian) always runs eagerly — the compiled trace does not take
+functorch-wrapped tensors. The choice is made from ray counts only (not timings), so the same
+command always takes the same path; the numbers agree either way.
+
+The backend is chosen per call (``backend=``) or for a block of code with ``use_backend`` (the CLI's
+``--backend`` option), so the analysis functions need no extra argument. The first compilation of a
+structure on this machine is timed and reported once through ``on_compile`` listeners (the CLI prints
+it) and remembered in ``lensopt_compiles.json`` in the Inductor cache directory.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import json
+import logging
+import os
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import torch
+import torch.autograd.forward_ad as fwad
+
+from lensopt.errors import LensoptError
+from lensopt.optics.intersect import NEWTON_ITERATIONS
+from lensopt.optics.lens import Lens
+from lensopt.optics.trace import Rays, RayTrace, trace
+
+__all__ = ["BACKENDS", "AUTO_MIN_RAYS", "check_backend", "use_backend", "set_backend", "current_backend",
+           "choose_backend",
+           "trace_with", "on_compile", "compile_log_path", "reset_auto_counts"]
+
+logger = logging.getLogger(__name__)
+
+BACKENDS = ("auto", "eager", "compiled")
+AUTO_MIN_RAYS = 10_000_000
+"""Rays (summed over calls) one lens structure is traced eagerly under ``auto`` before it is compiled:
+≈ 5 s of float64 eager tracing here, about what a compilation costs with a warm on-disk cache."""
+
+_current: contextvars.ContextVar[str | None] = contextvars.ContextVar("lensopt_trace_backend", default=None)
+_rays_seen: dict[tuple, int] = {}
+_compiled_keys: set[tuple] = set()
+_listeners: list[Callable[[str, float], None]] = []
+
+
+def check_backend(name: str, *, path: str = "--backend") -> str:
+    """``name`` if it is a backend, else a ``LensoptError`` naming ``path``."""
+    if name not in BACKENDS:
+        raise LensoptError(f"must be one of {', '.join(BACKENDS)}", path=path, got=name)
+    return name
+
+
+@contextlib.contextmanager
+def use_backend(name: str) -> Iterator[None]:
+    """Trace with backend ``name`` (auto | eager | compiled) inside the block."""
+    token = _current.set(check_backend(name))
+    try:
+        yield
+    finally:
+        _current.reset(token)
+
+
+def current_backend() -> str:
+    """The backend set by the innermost ``use_backend`` or ``set_backend`` (default: ``$LENSOPT_BACKEND``,
+    else auto)."""
+    name = _current.get()
+    return name if name is not None else check_backend(os.environ.get("LENSOPT_BACKEND", "auto"),
+                                                       path="LENSOPT_BACKEND")
+
+
+def set_backend(name: str) -> None:
+    """Trace with backend ``name`` from now on in this context (the CLI: one command per process)."""
+    _current.set(check_backend(name))
+
+
+def reset_auto_counts() -> None:
+    """Forget the rays counted per structure by ``auto`` (tests)."""
+    _rays_seen.clear()
+
+
+def on_compile(listener: Callable[[str, float], None]) -> Callable[[], None]:
+    """Call ``listener(description, seconds)`` when a structure is compiled for the first time on this
+    machine; returns a function that removes the listener."""
+    _listeners.append(listener)
+    return lambda: _listeners.remove(listener) if listener in _listeners else None
+
+
+def _in_forward_transform() -> bool:
+    return torch._C._functorch.peek_interpreter_stack() is not None or fwad._current_level >= 0
+
+
+def _key(lens: Lens, upto: int | None, record: bool, newton_iterations: int) -> tuple:
+    return (lens.shapes, lens.stop, upto, record, newton_iterations, lens.dtype, lens.device)
+
+
+def choose_backend(lens: Lens, n_rays: int, *, backend: str | None = None, upto: int | None = None,
+                   record: bool = False, newton_iterations: int = NEWTON_ITERATIONS, count: bool = True) -> str:
+    """``eager`` or ``compiled`` for a call tracing ``n_rays`` rays (``auto`` resolved as described above;
+    ``count`` adds the rays to the structure's running total)."""
+    name = current_backend() if backend is None else check_backend(backend, path="backend")
+    if name != "auto":
+        return name
+    if _in_forward_transform():
+        return "eager"
+    key = _key(lens, upto, record, newton_iterations)
+    if key in _compiled_keys:
+        return "compiled"
+    seen = _rays_seen.get(key, 0) + n_rays
+    if count:
+        _rays_seen[key] = seen
+    return "compiled" if seen > AUTO_MIN_RAYS else "eager"
+
+
+def trace_with(lens: Lens, rays: Rays, *, backend: str | None = None, upto: int | None = None,
+               record: bool = False, newton_iterations: int = NEWTON_ITERATIONS) -> RayTrace:
+    """``trace(lens, rays, ...)`` on the chosen backend (default: ``current_backend()``)."""
+    if backend is not None:
+        check_backend(backend, path="backend")
+    n_rays = torch.broadcast_shapes(rays.pos.shape[:-1], rays.dir.shape[:-1], rays.wavelength.shape).numel()
+    name = choose_backend(lens, n_rays, backend=backend, upto=upto, record=record,
+                          newton_iterations=newton_iterations)
+    if name == "eager":
+        return trace(lens, rays, upto=upto, record=record, newton_iterations=newton_iterations)
+    from lensopt.optics.compiled import compiled_trace  # imports torch._dynamo lazily
+
+    key = _key(lens, upto, record, newton_iterations)
+    first = key not in _compiled_keys
+    start = time.perf_counter()
+    out = compiled_trace(lens, rays, upto=upto, record=record, newton_iterations=newton_iterations)
+    if first:
+        _compiled_keys.add(key)
+        _report_first(key, time.perf_counter() - start)
+    return out
+
+
+def compile_log_path() -> Path:
+    """Where the first compilation of each structure on this machine is remembered."""
+    from torch._inductor.runtime.cache_dir_utils import cache_dir
+
+    return Path(cache_dir()) / "lensopt_compiles.json"
+
+
+def _report_first(key: tuple, seconds: float) -> None:
+    shapes, stop, upto, record, newton, dtype, device = key
+    desc = (f"{len(shapes)} surfaces ({'/'.join(sorted({s.kind for s in shapes}))}), "
+            f"{str(dtype).removeprefix('torch.')}, {device}{', recorded' if record else ''}"
+            f"{'' if upto is None else f', up to surface {upto}'}")
+    ident = repr(key)
+    try:
+        path = compile_log_path()
+        log = json.loads(path.read_text()) if path.exists() else {}
+    except (OSError, ValueError):
+        return
+    if ident in log:
+        return
+    log[ident] = {"structure": desc, "seconds": round(seconds, 3), "when": time.strftime("%Y-%m-%dT%H:%M:%SZ",
+                                                                                        time.gmtime())}
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".lensopt_compiles.", suffix=".part")
+        with os.fdopen(fd, "w") as f:
+            json.dump(log, f, indent=1)
+        os.replace(tmp, path)
+    except OSError:
+        return
+    logger.info("compiled the trace for %s in %.1f s (cached on disk in %s)", desc, seconds, path.parent)
+    for listener in list(_listeners):
+        listener(desc, seconds)

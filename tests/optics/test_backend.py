@@ -1,0 +1,125 @@
+"""The trace backend choice (``optics.backend``): compiled and eager give the same numbers through the
+library path (bundles, reports, the CLI), ``auto`` compiles only once enough rays were traced and
+never inside forward-mode transforms, bad names are one line and exit 2.
+
+Oracle: the eager ``trace`` (validated against optiland elsewhere); the compiled graph must reproduce
+it to rounding, 1e-12 mm on every ray intercept, with identical failure statuses.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from lensopt.cli import app
+from lensopt.errors import LensoptError
+from lensopt.optics import backend
+from lensopt.optics.backend import choose_backend, current_backend, on_compile, trace_with, use_backend
+from lensopt.optics.bundle import trace_bundle
+from lensopt.optics.sampling import PupilSampling
+from lensopt.spec import build, load_spec
+
+ROOT = Path(__file__).resolve().parents[2]
+CMOUNT = ROOT / "lenses" / "cmount_4p.json"
+COOKE = ROOT / "specs" / "cooke_triplet.toml"
+runner = CliRunner()
+
+
+@pytest.fixture(autouse=True)
+def _fresh_counts():
+    backend.reset_auto_counts()
+    yield
+    backend.reset_auto_counts()
+
+
+def test_compiled_bundle_equals_eager_to_1e12_mm_and_first_compile_is_reported_once(tmp_path, monkeypatch) -> None:
+    model = build(load_spec(CMOUNT))
+    lens, system = model.lens, model.system
+    pupil = PupilSampling.parse("rings:12").points(dtype=lens.dtype)
+    monkeypatch.setattr(backend, "compile_log_path", lambda: tmp_path / "lensopt_compiles.json")
+    monkeypatch.setattr(backend, "_compiled_keys", set())
+    seen: list[tuple[str, float]] = []
+    remove = on_compile(lambda desc, s: seen.append((desc, s)))
+    try:
+        eager = trace_bundle(lens, system, pupil, half_pupil=True, record=True, backend="eager")
+        fast = trace_bundle(lens, system, pupil, half_pupil=True, record=True, backend="compiled")
+        again = trace_bundle(lens, system, pupil, half_pupil=True, record=True, backend="compiled")
+    finally:
+        remove()
+    ok = eager.result.valid
+    assert ok.sum() > 0.9 * ok.numel()
+    assert torch.equal(eager.result.status, fast.result.status)
+    assert torch.equal(eager.result.failed_at, fast.result.failed_at)
+    assert (eager.result.pos - fast.result.pos)[ok].abs().max() < 1e-12
+    assert (eager.result.dir - fast.result.dir)[ok].abs().max() < 1e-12
+    for he, hc in zip(eager.result.hits, fast.result.hits, strict=True):
+        assert (he.pos - hc.pos)[ok].abs().max() < 1e-12
+    assert torch.equal(fast.result.pos, again.result.pos)
+    # Reported once: the first compile of this structure, not the second call, and it is on disk.
+    assert len(seen) == 1 and "9 surfaces" in seen[0][0] and seen[0][1] > 0
+    log = json.loads((tmp_path / "lensopt_compiles.json").read_text())
+    assert len(log) == 1
+
+
+def test_auto_is_eager_until_enough_rays_then_compiled(monkeypatch) -> None:
+    lens = build(load_spec(COOKE)).lens
+    monkeypatch.setattr(backend, "AUTO_MIN_RAYS", 1000)
+    assert choose_backend(lens, 600) == "eager"
+    assert choose_backend(lens, 300) == "eager"  # 900 so far
+    assert choose_backend(lens, 300) == "compiled"  # 1200 > 1000: compiling has paid
+    # Another structure (recorded hits) counts on its own.
+    assert choose_backend(lens, 600, record=True) == "eager"
+    with use_backend("eager"):
+        assert choose_backend(lens, 10**9) == "eager"
+    with use_backend("compiled"):
+        assert current_backend() == "compiled"
+        assert choose_backend(lens, 1) == "compiled"
+    assert current_backend() == "auto"
+
+
+def test_auto_stays_eager_inside_forward_mode_jacobians(monkeypatch) -> None:
+    lens = build(load_spec(COOKE)).lens
+    monkeypatch.setattr(backend, "AUTO_MIN_RAYS", 0)
+    chosen: list[str] = []
+
+    def f(c: torch.Tensor) -> torch.Tensor:
+        chosen.append(choose_backend(lens, 10**8))
+        return c * 2.0
+
+    torch.func.jacfwd(f)(torch.ones(2, dtype=torch.float64))
+    assert chosen == ["eager"]
+    assert choose_backend(lens, 1) == "compiled"  # outside the transform the threshold applies
+
+
+def test_env_default_and_bad_names(monkeypatch) -> None:
+    monkeypatch.setenv("LENSOPT_BACKEND", "eager")
+    assert current_backend() == "eager"
+    monkeypatch.setenv("LENSOPT_BACKEND", "fast")
+    with pytest.raises(LensoptError, match="LENSOPT_BACKEND"):
+        current_backend()
+    with pytest.raises(LensoptError, match="backend"):
+        trace_with(build(load_spec(COOKE)).lens, None, backend="fast")  # type: ignore[arg-type]
+
+
+def test_cli_bad_backend_is_one_line() -> None:
+    bad = runner.invoke(app, ["trace", str(COOKE), "--backend", "fast"])
+    assert bad.exit_code == 2
+    assert len(bad.output.strip().splitlines()) == 1 and "--backend" in bad.output
+
+
+@pytest.mark.slow  # compiles several structures (recorded, chief ray, clipped illumination lens): minutes cold
+def test_cli_trace_same_numbers_on_both_backends() -> None:
+    out = {}
+    for name in ("eager", "compiled"):
+        r = runner.invoke(app, ["trace", str(COOKE), "--json", "--sampling", "rings:8", "--backend", name])
+        assert r.exit_code == 0, r.output
+        out[name] = json.loads(r.stdout)
+    assert out["compiled"]["effective_spot_radius_um"] == pytest.approx(out["eager"]["effective_spot_radius_um"],
+                                                                        abs=1e-9)  # µm: 1e-12 mm
+    for fe, fc in zip(out["eager"]["fields"], out["compiled"]["fields"], strict=True):
+        assert fc["rms_spot_radius_um"] == pytest.approx(fe["rms_spot_radius_um"], abs=1e-9)
+        assert fc["failed_rays"] == fe["failed_rays"]
