@@ -84,6 +84,12 @@ def bench(spec_name: str, repeats: int, jacrev_max_rows: int, compiled: bool = F
         extra["compile_s"] = time.perf_counter() - t0
         extra["compiled"] = cj.compiled
         rows["jacfwd compiled (make_fx + Inductor)"] = _time(lambda: cj(theta)[0], repeats)
+        # The compile takes minutes: time the eager references again right beside the compiled row, so
+        # that a change of machine load during the compile does not bias the ratios.
+        t_res, _ = _time(lambda: p.residuals(theta).detach(), repeats)
+        rows["one residual evaluation"] = (t_res, None)
+        t_fwd, J = _time(lambda: p.jacobian(theta)[0], repeats)
+        rows["jacfwd (forward mode)"] = (t_fwd, J)
     if M <= jacrev_max_rows:
         rows["jacrev (reverse mode)"] = _time(lambda: torch.func.jacrev(p.residuals)(theta), max(1, repeats // 2))
     if fd:
