@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 TORCH_PIN := torch==2.13.0
 
-.PHONY: install demo test test-slow test-external lint clean
+.PHONY: install demo test test-slow test-fuzz-long test-external lint clean
 
 install: $(STAMP)
 
@@ -41,6 +41,14 @@ test: install
 # Long studies and multi-process checks, deselected from `make test` by the `slow` marker.
 test-slow: install
 	$(PY) -m pytest -q -m slow
+
+# The fuzz suite (tests/fuzz) with 10x the examples of `make test` (same fixed seed); the tally of inputs,
+# tracebacks, hangs and NaN outputs goes to out/fuzz_long.json (recorded in benchmarks/RESULTS.md).
+FUZZ_SCALE ?= 10
+test-fuzz-long: install
+	mkdir -p out
+	LENSOPT_FUZZ_SCALE=$(FUZZ_SCALE) LENSOPT_FUZZ_REPORT=out/fuzz_long.json $(PY) -m pytest -q tests/fuzz
+	cat out/fuzz_long.json
 
 # Optional: lensopt's CODE V export read back by rayoptics (Python >= 3.12, large install, no torch),
 # in its own venv. Set PY312 to a Python 3.12+ interpreter if python3.12 is not on the PATH.

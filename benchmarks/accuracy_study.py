@@ -154,12 +154,47 @@ def part_illumination(grid: int) -> None:
               flush=True)
 
 
+KEEP = {"rings": ("rings:4", "rings:16", "rings:64"), "rings_fixed": ("rings:16:nojitter", "rings:64:nojitter"),
+        "grid": ("grid:8", "grid:16", "grid:24", "grid:32", "grid:48", "grid:96"),
+        "float32": ("rings:16 float32", "rings:64 float32"), "compiled": ("rings:16 compiled", "rings:64 compiled")}
+
+
+def summarize() -> None:
+    """Condensed markdown of the recorded results_accuracy_*.json (every point is in the JSON)."""
+    data = {k: json.loads((BENCH / f"results_accuracy_{k}.json").read_text()) for k in LENSES}
+    print("| knob | setting | " + " | ".join(f"{k} error | {k} s" for k in data) + " |")
+    print("| --- | --- | " + " | ".join("--- | ---" for _ in data) + " |")
+    first = next(iter(data.values()))
+    for p in first["points"]:
+        if p["knob"] in KEEP and p["setting"] not in KEEP[p["knob"]]:
+            continue
+        cells = []
+        for d in data.values():
+            q = next((q for q in d["points"] if q["knob"] == p["knob"] and q["setting"] == p["setting"]), None)
+            if q is None:
+                cells.append(" | ")
+                continue
+            e = q["errors"]
+            psnr = f" ({q['note']})" if q["note"].startswith("PSNR") else ""
+            err = (f"ESR {e['esr']:.2e}, RMS {e['rms']:.2e}" if "esr" in e else
+                   " ".join(f"{v:.2e}" for v in e.values()) + psnr)
+            cells.append(f"{err} | {q['time_s']:.3f}")
+        print(f"| {p['knob']} | {p['setting']} | " + " | ".join(cells) + " |")
+    for k, d in data.items():
+        print(f"\n{k}: " + "; ".join(
+            f"{m} ≤ 1 %: " + (f"{r['cheapest']['setting']}" if r["cheapest"] else "none (" + r["why_not"] + ")")
+            for m, r in d["recommendation"].items()))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--part", default="accuracy,third,commands")
     ap.add_argument("--repeats", type=int, default=3)
     a = ap.parse_args()
     parts = a.part.split(",")
+    if "summary" in parts:
+        summarize()
+        return
     torch.set_num_threads(int(os.environ.get("OMP_NUM_THREADS", "2")))
     print(f"load before: {os.getloadavg()}")
     results = part_accuracy(a.repeats) if "accuracy" in parts or "third" in parts else {}

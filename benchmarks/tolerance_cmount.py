@@ -21,10 +21,17 @@ import torch
 
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
+from lensopt.spec.tolerance_build import make_job
 from lensopt.tolerance.evaluate import evaluate
 from lensopt.tolerance.model import draw
-from lensopt.tolerance.run import monte_carlo, nominal_metrics, rss_prediction, scalar_metric, sensitivity
-from lensopt.tolerance.setup import make_job
+from lensopt.tolerance.run import (
+    monte_carlo,
+    nominal_metrics,
+    rss_prediction,
+    scalar_metric,
+    sensitivity,
+    yield_table,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -84,11 +91,12 @@ def main() -> None:
     m0 = float(scalar_metric(nominal, "esr")[0])
     rows, _ = sensitivity(job, nominal)
     rss = rss_prediction(rows, job.tols, m0)
-    runs = {}
+    runs, scalars = {}, {}
     for n, seed in ((100, 0), (1000, 1)):  # independent draws (different seeds)
         t0 = time.perf_counter()
         mc = monte_carlo(job, n, seed=seed)
         elapsed = time.perf_counter() - t0
+        scalars[n] = mc.scalar
         runs[n] = {"seconds": elapsed, "s_per_trial": elapsed / n, "stats": mc.stats, "yields": mc.yields,
                    "focus_shift_um": {"mean": float(mc.metrics["focus_shift"].mean() * 1e3),
                                       "std": float(mc.metrics["focus_shift"].std(ddof=1) * 1e3)},
@@ -96,13 +104,20 @@ def main() -> None:
                    "bin_edges": np.histogram(mc.scalar, bins=10)[1].tolist()}
     inside = [r1["ci_low"] <= r2["value"] <= r1["ci_high"] for r1, r2 in zip(runs[100]["yields"],
                                                                           runs[1000]["yields"], strict=True)]
+    # Five levels at once: 99 % per level is 95 % for the family (Bonferroni).
+    family = yield_table(scalars[100], higher_is_better=False, confidence=1 - 0.05 / 5)
+    inside_family = [r1["ci_low"] <= r2["value"] <= r1["ci_high"] for r1, r2 in zip(family, runs[1000]["yields"],
+                                                                                 strict=True)]
+    se = runs[100]["stats"]["std"] / 100**0.5
+    mean_ok = abs(runs[1000]["stats"]["mean"] - runs[100]["stats"]["mean"]) <= 3 * se
     speeds = [speed(model, int(r), args.speed_trials, args.loop_trials, args.compiled)
               for r in args.speed_rings.split(",")]
     load1 = os.getloadavg()
     shift_um = float(nominal["focus_shift"][0]) * 1e3
     result = {"sampling": args.sampling, "nominal_esr_um": m0, "nominal_focus_shift_um": shift_um,
               "tolerances": len(job.tols), "rss": rss, "runs": {str(k): v for k, v in runs.items()},
-              "converged": inside, "speed": speeds, "load_before": load0, "load_after": load1,
+              "converged": inside, "converged_family_99": inside_family, "family_ci_100": family,
+              "mean_within_3se": mean_ok, "speed": speeds, "load_before": load0, "load_after": load1,
               "sensitivity_top": [{"name": r.name, "minus": r.minus, "plus": r.plus, "inverse": r.inverse}
                                   for r in rows[:8]]}
     Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
@@ -121,7 +136,10 @@ def main() -> None:
         ys = " | ".join(f"{y['value']:.3f} [{y['ci_low']:.3f}, {y['ci_high']:.3f}]" for y in r["yields"])
         print(f"| {n} | {st['mean']:.3f} | {st['std']:.3f} | {st['min']:.3f} | {st['max']:.3f} | {ys} | "
               f"{r['s_per_trial']:.4f} |")
-    print(f"\n- 1000-trial yields inside the 100-trial 95 % CIs: {inside}")
+    print(f"\n- 1000-trial yields inside the 100-trial 95 % CIs (per level): {inside}")
+    print(f"- inside the 100-trial 99 % CIs (95 % for the five levels together): {inside_family}; "
+          + ", ".join(f"{r['ci_low']:.3f}–{r['ci_high']:.3f}" for r in family))
+    print(f"- 1000-trial mean within the 100-trial mean ± 3 standard errors ({3 * se:.3f} µm): {mean_ok}")
     print("\n| rings | rays/trial | batched s/trial | loop s/trial | loop/batched | compiled s/trial | compile s |")
     print("|---:|---:|---:|---:|---:|---:|---:|")
     for s in speeds:

@@ -1,4 +1,4 @@
-"""``python -m lensopt``: the command line (same as the ``lensopt`` script)."""
+"""``python -m lensopt`` (and ``torchrun ... -m lensopt``): the command line."""
 
 from lensopt.cli import app
 

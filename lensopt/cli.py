@@ -43,7 +43,7 @@ if TYPE_CHECKING:
 app = typer.Typer(cls=LensoptGroup, add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   rich_markup_mode=None,
                   help="Differentiable lens design: trace, plot, optimize, simulate, export.")
-plot_app = typer.Typer(no_args_is_help=True, help="Figures: layout, fans, spots, PSFs, field curves.")
+plot_app = typer.Typer(cls=LensoptGroup, no_args_is_help=True, help="Figures: layout, fans, spots, PSFs, field curves.")
 app.add_typer(plot_app, name="plot")
 
 
@@ -409,55 +409,7 @@ def import_codev(
 # -------------------------------------------------------------------------------------- optimize
 
 
-@app.command(short_help="Optimize a spec (LM or Adam); Ctrl-C or SIGTERM keeps the best lens.")
-@handle_errors
-def optimize(
-    spec: Annotated[Path, typer.Argument(help="Lens spec (.toml or .json) with vary lists and an optimize section.")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="Where to write the optimized lens (.json).")],
-    optimizer: Annotated[str | None, typer.Option("--optimizer", help="lm | adam (default: the spec's).")] = None,
-    steps: Annotated[int | None, typer.Option("--steps", min=1, help="Steps (default: the spec's).")] = None,
-    seed: SeedOpt = 0,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live display.")] = False,
-    as_json: JsonOpt = False,
-    device: Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N: where the optimization runs.")] = "cpu",
-    jacobian: Annotated[str, typer.Option("--jacobian", help="eager | compiled (LM Jacobian; compiled: same "
-                                          "values, minutes to compile, faster steps).")] = "eager",
-) -> None:
-    """Levenberg–Marquardt (or Adam) for spot size with solves and constraints; Ctrl-C keeps the best lens."""
-    from lensopt.analysis.report import trace_report
-    from lensopt.cli_optimize import LiveProgress, render_summary, summary
-    from lensopt.optics.sampling import PupilSampling
-    from lensopt.optim import Problem
-    from lensopt.optim import optimize as run_optimize
-    from lensopt.optim.report import constraint_report
-    from lensopt.spec import build, load_spec, save_json
-
-    if output.suffix.lower() != ".json":
-        raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
-    check_output(output)
-    start_spec = load_spec(spec)
-    try:
-        with LiveProgress(err_console, enabled=not quiet) as live:
-            result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live,
-                                  device=device, jacobian=jacobian)
-    except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the first step: the best lens is the start lens
-        with signals_deferred():
-            save_json(start_spec, output)
-        word = "terminated" if state.signal_exit == 143 else "interrupted"
-        raise typer.Exit(report_signal(f"{word} before the first step; wrote the start lens to {output}")) from None
-    with signals_deferred():  # a second signal waits until the file is complete
-        save_json(result.spec, output)  # atomic
-    sampling = PupilSampling.parse("rings:24", seed=seed)
-    final_problem = Problem(result.spec, seed=seed)
-    s = summary(result, trace_report(build(start_spec), sampling), trace_report(build(result.spec), sampling),
-                constraint_report(final_problem, final_problem.theta0, sampling), str(output))
-    if as_json:
-        print_json(s)
-    else:
-        render_summary(console, s)
-    if result.interrupted:  # the summary above says so
-        state.signal_reported = True
-        raise typer.Exit(state.signal_exit)
+# (optimize: lensopt/cli_optimize.py)
 
 
 # -------------------------------------------------------------------------------------- simulate
@@ -596,25 +548,25 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
     save_figure(field_figure(summary, title=title, subtitle=sub), out, dpi=dpi)
     err_console.print(f"wrote {output}")
 
-from lensopt.cli_check import register as _register_check  # noqa: E402
 
-_register_check(app)
-from lensopt.cli_accuracy import register as _register_accuracy  # noqa: E402
+# Commands that live in modules of their own (registered last: they need the apps above).
+from lensopt import (  # noqa: E402
+    cli_accuracy,
+    cli_check,
+    cli_evaluate,
+    cli_optimize,
+    cli_restore,
+    cli_tolerance,
+    cli_zemax,
+)
 
-_register_accuracy(app)
-
-
-from lensopt.cli_evaluate import register as _register_evaluate  # noqa: E402  (needs the app above)
-
-_register_evaluate(app)
-
-from lensopt.cli_tolerance import register as _register_tolerance  # noqa: E402
-
-_register_tolerance(app, plot_app)
-
-from lensopt.cli_zemax import register as _register_zemax  # noqa: E402
-
-_register_zemax(app)
+cli_check.register(app)
+cli_accuracy.register(app)
+cli_evaluate.register(app, plot_app)
+cli_tolerance.register(app, plot_app)
+cli_zemax.register(app)
+cli_restore.register(app)
+cli_optimize.register(app)
 
 if __name__ == "__main__":  # pragma: no cover
     app()

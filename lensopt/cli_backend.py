@@ -9,8 +9,6 @@ from typing import Annotated, Any, TypeVar
 import typer
 from rich.console import Console
 
-from lensopt.optics.backend import on_compile, use_backend
-
 F = TypeVar("F", bound=Callable[..., Any])
 
 BackendOpt = Annotated[str, typer.Option(
@@ -24,6 +22,8 @@ def with_backend(err_console: Console) -> Callable[[F], F]:
     def decorate(fn: F) -> F:
         @functools.wraps(fn)
         def wrapper(*args: Any, **kwargs: Any) -> Any:
+            from lensopt.optics.backend import on_compile, use_backend  # torch: only when the command runs
+
             remove = on_compile(lambda desc, s: err_console.print(
                 f"compiled the trace for {desc} in {s:.1f} s (first time on this machine; cached on disk)",
                 highlight=False))

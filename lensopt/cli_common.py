@@ -173,6 +173,17 @@ def signals_deferred() -> Iterator[None]:
 class LensoptGroup(TyperGroup):
     """The top-level command group: usage errors as one line, signals, exit codes (see the module doc)."""
 
+    def format_commands(self, ctx: Any, formatter: Any) -> None:
+        """Each command's first sentence in full (click cuts it at the terminal width with "...")."""
+        rows = []
+        for name in self.list_commands(ctx):
+            cmd = self.get_command(ctx, name)
+            if cmd is not None and not cmd.hidden:
+                rows.append((name, cmd.get_short_help_str(limit=10_000)))
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
     def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
              standalone_mode: bool = True, **extra: Any) -> Any:
         code = 0
@@ -183,9 +194,10 @@ class LensoptGroup(TyperGroup):
             code = rv if isinstance(rv, int) else 0
             if code == EX_SIGINT:  # typer turns a KeyboardInterrupt outside the commands into exit 130
                 code = report_signal()
-        except getattr(click_exc, "NoArgsIsHelpError", ()) as err:
-            err.show()
-            code = err.exit_code
+        except getattr(click_exc, "NoArgsIsHelpError", ()) as err:  # `lensopt`, `lensopt plot`: the help
+            if err.ctx is not None:
+                sys.stdout.write(err.ctx.get_help() + "\n")
+            code = 0
         except click_exc.ClickException as err:
             hint = ""
             ctx = getattr(err, "ctx", None)

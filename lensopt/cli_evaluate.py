@@ -17,9 +17,12 @@ from lensopt.errors import LensoptError
 __all__ = ["register"]
 
 
-def register(app: typer.Typer) -> None:
-    """Add the ``evaluate`` command to ``app``."""
-    from lensopt.cli import JsonOpt, LensArg, SeedOpt, console, err_console, handle_errors, load_model, print_json
+def register(app: typer.Typer, plot_app: typer.Typer | None = None) -> None:
+    """Add the ``evaluate`` command to ``app`` (and ``plot regions`` to ``plot_app``)."""
+    from lensopt.cli import JsonOpt, LensArg, console, err_console, handle_errors, load_model, print_json
+
+    if plot_app is not None:
+        _register_plot(plot_app)
 
     @app.command()
     @handle_errors
@@ -36,8 +39,11 @@ def register(app: typer.Typer) -> None:
         noise: Annotated[float, typer.Option("--noise", help="Additive Gaussian noise σ, fraction of the maximum "
                                              "(the seed's training value: 0.005).")] = 0.0,
         rings: Annotated[int, typer.Option("--rings", help="Rings of relative tile radius in the breakdown.")] = 4,
-        seed: SeedOpt = 0,
+        seed: Annotated[int, typer.Option("--seed", help="Seed of the scene ↔ tile pairing, the dead-leaves "
+                                          "scenes, the noise and the pupil jitter.")] = 0,
         as_json: JsonOpt = False,
+        irm: Annotated[Path | None, typer.Option("--irm", help="Restoration network checkpoint (train-irm or "
+                                                 "joint): score before and after restoration.")] = None,
     ) -> None:
         """Pre-restoration PSNR and SSIM of central crops, each paired with a sensor tile (S4.3.1)."""
         from lensopt.cli_imaging import parse_grid
@@ -61,16 +67,57 @@ def register(app: typer.Typer) -> None:
         tile_grid(sensor_of(camera, patch, patch)[0], patch, option="--patch")  # bad sensor/patch: before the bar
         scenes, names, desc = scene_source(images, count=count, patch=patch, seed=seed)
         options = PlanOptions(sampling=rays, kernel=kernel, grid=parse_grid(grid), seed=seed)
-        with Progress(TextColumn("evaluating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                      TimeRemainingColumn(), console=err_console, transient=True, disable=as_json) as bar:
-            task = bar.add_task("scenes", total=len(names))
-            result = run_evaluate(camera, scenes, names, patch=patch, seed=seed, options=options,
-                                  noise_sigma=noise, rings=rings, images=desc,
-                                  progress=lambda done, total: bar.update(task, completed=done))
+        hooks: list[Any] = [None]
+        if irm is not None:
+            from lensopt.cli_restore import irm_hook
+
+            hooks.append(irm_hook(load_model(lens), irm))
+        results = []
+        for hook in hooks:
+            with Progress(TextColumn("evaluating" if hook is None else "restoring"), BarColumn(),
+                          MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(), console=err_console,
+                          transient=True, disable=as_json) as bar:
+                task = bar.add_task("scenes", total=len(names))
+                results.append(run_evaluate(camera, scenes, names, patch=patch, seed=seed, options=options,
+                                            noise_sigma=noise, rings=rings, images=desc, restore=hook,
+                                            progress=lambda done, total, b=bar, t=task: b.update(t, completed=done)))
         if as_json:
-            print_json(result.as_json())
+            out = results[0].as_json()
+            if len(results) > 1:
+                out["after_restoration"] = results[1].as_json()
+            print_json(out)
         else:
-            _render(console, result.as_json())
+            for result in results:
+                _render(console, result.as_json())
+
+
+def _register_plot(plot_app: typer.Typer) -> None:
+    from lensopt.cli import LensArg, err_console, handle_errors, load_model
+
+    @plot_app.command("regions")
+    @handle_errors
+    def plot_regions_cmd(
+        lens: LensArg,
+        output: Annotated[Path, typer.Option("--output", "-o", help="Figure file (png, pdf, svg).")],
+        patch: Annotated[int, typer.Option("--patch", help="Tile size, pixels.")] = 256,
+        batch: Annotated[int, typer.Option("--batch", help="Tiles drawn (one batch).")] = 16,
+        seed: Annotated[int, typer.Option("--seed", help="Seed of the draw.")] = 0,
+        dpi: Annotated[int, typer.Option("--dpi", help="Raster resolution.")] = 150,
+    ) -> None:
+        """Sensor tiles by distance from the centre and one pseudo-random batch of them (S3.3.1, Figure S8)."""
+        from lensopt.imaging.regions import RegionSampler, tile_grid
+        from lensopt.imaging.simulate import sensor_of
+        from lensopt.plot.regions import plot_regions
+        from lensopt.plot.style import save_figure
+        from lensopt.spec import camera_of
+
+        camera = camera_of(load_model(lens))
+        grid = tile_grid(sensor_of(camera, patch, patch)[0], patch, option="--patch")
+        if batch < 1:
+            raise LensoptError("must be at least 1", path="--batch", got=batch)
+        tiles = RegionSampler(grid, seed=seed).sample(batch)
+        save_figure(plot_regions(grid, tiles), output, dpi=dpi)
+        err_console.print(f"wrote {output}")
 
 
 def _render(console: Any, r: dict[str, Any]) -> None:

@@ -1,20 +1,37 @@
-"""Rendering for ``lensopt optimize`` (CLI layer: rich lives here, no physics): the live progress
+"""``lensopt optimize`` (CLI layer: rich lives here, no physics): the command, the live progress
 display and the final summary."""
 
 from __future__ import annotations
 
 import math
 import time
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
 
+import typer
 from rich.console import Console, Group
 from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
-from lensopt.optim.run import OptimizeResult, Progress
+from lensopt.cli_common import (
+    JsonOpt,
+    SeedOpt,
+    check_output,
+    console,
+    err_console,
+    handle_errors,
+    print_json,
+    report_signal,
+    signals_deferred,
+    state,
+)
+from lensopt.errors import LensoptError
 
-__all__ = ["LiveProgress", "plain_line", "render_summary", "summary"]
+if TYPE_CHECKING:
+    from lensopt.optim.run import OptimizeResult, Progress
+
+__all__ = ["LiveProgress", "plain_line", "register", "render_summary", "summary"]
 
 
 class LiveProgress:
@@ -32,6 +49,7 @@ class LiveProgress:
         self.events: list[str] = []
         self._shown = 0.0
         self._printed = -math.inf
+        self._events_shown = 0
 
     def __enter__(self) -> LiveProgress:
         if self.enabled and not self.plain:
@@ -52,12 +70,12 @@ class LiveProgress:
         if p.event and p.event != "merit rose":
             self.events.append(f"step {p.step}: {p.event}")
         now = time.monotonic()
-        if self.enabled and self.plain:
-            if p.event and p.event != "merit rose":
-                self.console.print(f"step {p.step}: {p.event}", highlight=False, soft_wrap=True, markup=False)
-            if now - self._printed >= self.interval_s or p.step == p.steps:
-                self._printed = now
-                self.console.print(plain_line(p), highlight=False, soft_wrap=True, markup=False)
+        if self.enabled and self.plain and (now - self._printed >= self.interval_s or p.step == p.steps):
+            self._printed = now
+            new = self.events[self._events_shown:]
+            self._events_shown = len(self.events)
+            note = f"; {len(new)} event(s), last {new[-1]}" if new else ""
+            self.console.print(plain_line(p) + note, highlight=False, soft_wrap=True, markup=False)
         if self.live is not None and (now - self._shown > 0.12 or p.step == p.steps):
             self._shown = now
             self.live.update(self._render(p))
@@ -150,3 +168,66 @@ def render_summary(console: Console, s: dict[str, Any]) -> None:
     console.print("constraints satisfied: " + ("[green]yes[/]" if c["satisfied"] else "[red]no[/]"))
     if s["warning"]:
         console.print(f"[yellow]warning:[/] {s['warning']}")
+
+
+def register(app: typer.Typer) -> None:
+    """``lensopt optimize``."""
+
+    @app.command(short_help="Optimize a spec (LM or Adam); Ctrl-C or SIGTERM keeps the best lens.")
+    @handle_errors
+    def optimize(
+        spec: Annotated[Path, typer.Argument(help="Lens spec (.toml or .json) with vary lists and an optimize "
+                                             "section.")],
+        output: Annotated[Path, typer.Option("--output", "-o", help="Where to write the optimized lens (.json).")],
+        optimizer: Annotated[str | None, typer.Option("--optimizer", help="lm | adam (default: the spec's).")] = None,
+        steps: Annotated[int | None, typer.Option("--steps", min=1, help="Steps (default: the spec's).")] = None,
+        seed: SeedOpt = 0,
+        quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live display.")] = False,
+        as_json: JsonOpt = False,
+        device: Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N | auto: where the optimization "
+                                            "runs.")] = "cpu",
+        jacobian: Annotated[str, typer.Option("--jacobian", help="eager | compiled (LM Jacobian; compiled: same "
+                                              "values, minutes to compile, faster steps).")] = "eager",
+        checkpoint: Annotated[Path | None, typer.Option("--checkpoint", help="restored: checkpoint folder.")] = None,
+        resume: Annotated[bool, typer.Option("--resume", help="restored: continue --checkpoint.")] = False,
+        log_dir: Annotated[Path | None, typer.Option("--log-dir", help="restored: TensorBoard folder.")] = None,
+    ) -> None:
+        """Levenberg–Marquardt (or Adam) for spot size with solves and constraints; Ctrl-C keeps the best lens."""
+        from lensopt.analysis.report import trace_report
+        from lensopt.optics.sampling import PupilSampling
+        from lensopt.optim import Problem
+        from lensopt.optim import optimize as run_optimize
+        from lensopt.optim.report import constraint_report
+        from lensopt.spec import build, load_spec, save_json
+
+        if output.suffix.lower() != ".json":
+            raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
+        check_output(output)
+        start_spec = load_spec(spec)
+        if start_spec.optimize is not None and start_spec.optimize.objective == "restored":
+            from lensopt.cli_restore import optimize_restored
+
+            return optimize_restored(start_spec, output, steps=steps, seed=seed, checkpoint=checkpoint, resume=resume,
+                                     device=device, log_dir=log_dir, quiet=quiet, as_json=as_json)
+        try:
+            with LiveProgress(err_console, enabled=not quiet) as live:
+                result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live,
+                                      device=device, jacobian=jacobian)
+        except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the first step: the best lens is the start lens
+            with signals_deferred():
+                save_json(start_spec, output)
+            word = "terminated" if state.signal_exit == 143 else "interrupted"
+            raise typer.Exit(report_signal(f"{word} before the first step; wrote the start lens to {output}")) from None
+        with signals_deferred():  # a second signal waits until the file is complete
+            save_json(result.spec, output)  # atomic
+        sampling = PupilSampling.parse("rings:24", seed=seed)
+        final_problem = Problem(result.spec, seed=seed)
+        s = summary(result, trace_report(build(start_spec), sampling), trace_report(build(result.spec), sampling),
+                    constraint_report(final_problem, final_problem.theta0, sampling), str(output))
+        if as_json:
+            print_json(s)
+        else:
+            render_summary(console, s)
+        if result.interrupted:  # the summary above says so
+            state.signal_reported = True
+            raise typer.Exit(state.signal_exit)

@@ -45,11 +45,13 @@ def parse_frequencies(text: str, path: str) -> list[float]:
 
 
 def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, workers: int, out_dir: Path | None,
-                     worst: int, inverse_delta: float | None, sensitivity: bool = True) -> dict[str, Any]:
+                     worst: int, inverse_delta: float | None, sensitivity: bool = True,
+                     compiled: bool = False) -> dict[str, Any]:
     """Run sensitivity and Monte Carlo; write plots and worst trials under ``out_dir``; plain data."""
     import torch
 
     from lensopt.spec.io import save_json
+    from lensopt.spec.tolerance_build import make_job, trial_spec
     from lensopt.tolerance.run import (
         HIGHER_IS_BETTER,
         monte_carlo,
@@ -58,9 +60,12 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
         scalar_metric,
     )
     from lensopt.tolerance.run import sensitivity as run_sensitivity
-    from lensopt.tolerance.setup import make_job, trial_spec
 
     job = make_job(model, settings)
+    if compiled:
+        import dataclasses
+
+        job = dataclasses.replace(job, compiled=True)
     unit = _METRIC_UNITS[job.metric]
     nominal = nominal_metrics(job)
     m0 = float(scalar_metric(nominal, job.metric)[0])
@@ -161,7 +166,8 @@ def _render(console: Any, r: dict[str, Any], top: int = 15) -> None:
     if "monte_carlo" in r:
         mc = r["monte_carlo"]
         st = mc["stats"]
-        console.print(f"Monte Carlo: {mc['trials']} trials ({mc['scheduler']}), {mc['seconds_per_trial']:.4f} s/trial; "
+        console.print(f"Monte Carlo: {mc['trials']} trials ({mc['scheduler']}), {mc['seconds_per_trial']:.4f} s/trial "
+                      f"(wall time, cluster start included); "
                       f"mean {st['mean']:.4f}, std {st['std']:.4f}, min {st['min']:.4f}, max {st['max']:.4f}; "
                       f"trials with failed rays {st['trials_with_failed_rays']}, "
                       f"compensator failures {st['compensator_failures']}")
@@ -216,6 +222,8 @@ def register(app: typer.Typer, plot_app: typer.Typer) -> None:
         inverse_delta: Annotated[float | None, typer.Option("--inverse-delta", help="Metric change of the "
                                                             "inverse sensitivity (default 10 % of nominal).")] = None,
         no_sensitivity: Annotated[bool, typer.Option("--no-sensitivity", help="Skip the sensitivity table.")] = False,
+        compile_: Annotated[bool, typer.Option("--compile", help="torch.compile the Monte-Carlo evaluation "
+                                               "(minutes to compile; for long runs).")] = False,
         as_json: JsonOpt = False,
     ) -> None:
         """Tolerancing: sensitivity table, inverse sensitivity, RSS prediction, Monte Carlo with yields,
@@ -241,7 +249,8 @@ def register(app: typer.Typer, plot_app: typer.Typer) -> None:
             raise LensoptError(first["msg"], path=where) from None
         sched = None if scheduler == "serial" else scheduler
         report = tolerance_report(model, settings, scheduler=sched, workers=workers, out_dir=output_dir,
-                                  worst=worst, inverse_delta=inverse_delta, sensitivity=not no_sensitivity)
+                                  worst=worst, inverse_delta=inverse_delta, sensitivity=not no_sensitivity,
+                                  compiled=compile_)
         if as_json:
             print_json(report)
         else:

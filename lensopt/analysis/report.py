@@ -197,7 +197,10 @@ def ray_report(
     The ray is launched like the rays of ``trace_bundle``: relative pupil coordinates on the system's
     paraxial entrance pupil (reference wavelength), whatever ``wavelength_nm`` is.
     """
-    # The same lens at one wavelength: indices of every medium at that wavelength (as the builder does).
+    # The same lens at one wavelength: indices of every medium at that wavelength (as the builder does,
+    # with the same check of each glass's valid range).
+    for i, medium in enumerate(model.media[1:]):
+        medium.check_wavelengths([wavelength_nm * 1e-3], path=f"surfaces[{i}].material")
     wl = torch.tensor([wavelength_nm * 1e-3], dtype=model.lens.dtype, device=model.lens.device)
     lens = dataclasses.replace(model.lens, wavelength_um=wl, index=torch.stack([m.index(wl) for m in model.media]))
     system = dataclasses.replace(model.system, wavelength_weights=torch.ones_like(wl), reference=0)

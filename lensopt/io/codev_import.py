@@ -118,7 +118,10 @@ def import_codev(text: str, *, source: str = "seq") -> CodevImport:
     for cmd in seq.commands:
         if st.done:
             break
-        _command(st, cmd)
+        try:
+            _command(st, cmd)
+        except IndexError:  # a command without the values it needs ("A" with no coefficient)
+            raise _err(st, cmd, f"{cmd.name} needs more values") from None
     if not st.surfaces:
         raise SpecError("no surfaces (S lines) between SO and SI", path=source)
     warnings: list[str] = []

@@ -31,9 +31,9 @@ from pathlib import Path
 from typing import Any
 
 from lensopt.errors import LensoptError, SpecError
+from lensopt.io.zemax_materials import material, range_warnings
 from lensopt.io.zemax_system import system_from_zemax
-from lensopt.materials.agf import AgfGlass, agf_glass, decode_text, read_agf
-from lensopt.materials.catalog import find_glass, normalize_name
+from lensopt.materials.agf import decode_text, read_agf
 
 __all__ = ["ZemaxImport", "read_zemax", "import_zemax", "NOTE_PREFIX", "INFINITE_OBJECT", "UNITS"]
 
@@ -43,20 +43,19 @@ NOTE_PREFIX = "lensopt:"
 INFINITE_OBJECT = 1e10
 #: UNIT tokens -> millimetres.
 UNITS = {"MM": 1.0, "CM": 10.0, "IN": 25.4, "METER": 1000.0, "M": 1000.0}
-#: GCAT names -> lensopt vendor keys.
-_VENDORS = {"SCHOTT": "schott", "OHARA": "ohara", "HIKARI": "hikari", "HOYA": "hoya", "CDGM": "cdgm",
-            "SUMITA": "sumita"}
+#: Surface operands: those read here, plus those whose content the file already resolved (pickups, variable
+#: flags) or that do not change the traced rays (display, coatings, thermal data, mechanical semi-diameter).
 _SURFACE_OPS = frozenset("TYPE CURV CONI PARM XDAT DISZ GLAS DIAM STOP CLAP FLAP OBDC SQAP ELAP OBSC SCBD "
-                         "COMM FIMP HIDE MIRR SLAB POPS MEMA VPAR VCRV VDSZ VCON VXDT PZUP COAT TCE IGNR "
-                         "FLOA_S MOFF_S".split())
+                         "COMM FIMP HIDE MIRR SLAB POPS MEMA VPAR VCRV VDSZ VCON VXDT PZUP COAT TCE IGNR".split())
 _SYSTEM_OPS = frozenset("NAME UNIT ENPD FNUM OBNA FLOA FTYP XFLN YFLN XFLD YFLD FWGN VDXN VDYN VCXN VCYN VANN "
                         "WAVM WAVL WWGT PWAV GCAT MODE RAIM NOTE".split())
 #: Operands with no effect on the traced lens (display, file, environment bookkeeping).
 _SILENT = frozenset("VERS PFIL LANG ENVD GFAC PUSH SDMA OMMA ROPD PICB POLS GLRS GSTD NSCD COFN HYPR BLNK "
-                    "ZVCY ZVDY ZVCX ZVDX MNUM MOFF TOL DMFS PRIM CONF SURF_END".split())
+                    "ZVCY ZVDY ZVCX ZVDX MNUM MOFF TOL DMFS".split())
 #: Surface operands that change the lens but that lensopt does not model: ignored with a warning.
 _APERTURE_IGNORED = {"SQAP": "rectangular aperture", "ELAP": "elliptical aperture", "OBSC": "obscuration",
                      "OBDC": "aperture decenter", "SCBD": "coordinate return / tilt-decenter data"}
+_MERIT = "merit function / tolerance data"
 
 
 @dataclass
@@ -101,6 +100,7 @@ class ZFile:
     ignored: dict[str, int] = field(default_factory=dict)
     scale: float = 1.0
     extras: dict[str, Any] = field(default_factory=dict)
+    notices: list[str] = field(default_factory=list)
 
     def last(self, key: str) -> tuple[int, list[str]] | None:
         items = self.system.get(key)
@@ -136,6 +136,13 @@ def import_zemax(text: str, *, source: str = "zmx",
             read_agf(c)
         except LensoptError as err:
             raise SpecError(err.message, path=f"--catalog {c}") from None
+    try:
+        return _import(text, source, catalogs)
+    except (ValueError, OverflowError, IndexError, KeyError, ZeroDivisionError) as err:
+        raise SpecError(f"malformed file ({type(err).__name__}: {err})", path=source) from None
+
+
+def _import(text: str, source: str, catalogs: Any) -> ZemaxImport:
     zf = parse_zmx(text, source=source)
     warnings: list[str] = []
     extras = _extras(zf, warnings)
@@ -160,11 +167,21 @@ def import_zemax(text: str, *, source: str = "zmx",
     if object_distance is not None and not object_distance > 0:
         raise SpecError(f"line {obj.line}: the object distance must be positive (got {obj.thickness:g})",
                         path=source)
+    warnings += zf.notices
     for name, count in zf.ignored.items():
+        if name == _MERIT:
+            warnings.append(f"ignored the merit function and tolerance data ({count} lines)")
+            continue
         warnings.append(f"ignored Zemax operand {name} ({count} line{'s' if count > 1 else ''}): lensopt does "
                         "not model it")
-    spec = system_from_zemax(zf, surfaces, object_distance, extras, warnings)
-    _range_warnings(spec, warnings)
+    try:
+        spec = system_from_zemax(zf, surfaces, object_distance, extras, warnings)
+    except LensoptError as err:
+        if "outside the valid range" in err.message:
+            raise SpecError(f"{err}; lensopt's catalog data stop there: give the glass's AGF catalog with "
+                            "--catalog FILE.agf to extrapolate it with a warning", path=source) from None
+        raise
+    range_warnings(spec, warnings)
     return ZemaxImport(spec, warnings)
 
 
@@ -180,9 +197,19 @@ def _num(tokens: list[str], i: int, line: int, source: str, default: float | Non
     if t.upper() in ("INFINITY", "INF"):
         return math.inf
     try:
-        return float(t.replace(",", "."))
+        value = float(t.replace(",", "."))
     except ValueError:
         raise SpecError(f"line {line}: {tokens[0]}: expected a number, got {t!r}", path=source) from None
+    if not math.isfinite(value):
+        raise SpecError(f"line {line}: {tokens[0]}: expected a finite number, got {t!r}", path=source)
+    return value
+
+
+def _index(tokens: list[str], i: int, line: int, source: str, default: int | None = None) -> int:
+    value = _num(tokens, i, line, source, None if default is None else float(default))
+    if value != int(value):
+        raise SpecError(f"line {line}: {tokens[0]}: expected an integer, got {tokens[i]!r}", path=source)
+    return int(value)
 
 
 def parse_zmx(text: str, *, source: str) -> ZFile:
@@ -197,10 +224,17 @@ def parse_zmx(text: str, *, source: str) -> ZFile:
             continue
         op = tokens[0].upper()
         if op == "SURF":
-            current = ZSurface(int(_num(tokens, 1, number, source, default=len(zf.surfaces))), number)
+            current = ZSurface(_index(tokens, 1, number, source, default=len(zf.surfaces)), number)
             zf.surfaces.append(current)
             in_merit = False
             continue
+        if op == "MNUM" and len(tokens) > 1 and _is_number(tokens[1]) and float(tokens[1]) > 1:
+            zf.notices.append(f"the file has {int(float(tokens[1]))} configurations (MNUM): only the nominal one "
+                              "is imported")
+        if op == "ENVD" and len(tokens) > 2 and _is_number(tokens[1]) and _is_number(tokens[2]) and (
+                float(tokens[1]) != 20.0 or float(tokens[2]) != 1.0):
+            zf.notices.append(f"ignored the environment ENVD {tokens[1]} °C, {tokens[2]} atm: indices are taken at "
+                              "the catalogs' reference conditions (20 °C, 1 atm)")
         if op in ("DMFS", "TOL", "MNUM", "BLNK") or in_merit:
             in_merit = op not in _SYSTEM_OPS or in_merit
             if op not in ("BLNK",):
@@ -233,7 +267,7 @@ def parse_zmx(text: str, *, source: str) -> ZFile:
             continue
         zf.ignored[op] = zf.ignored.get(op, 0) + 1
     if merit_lines:
-        zf.ignored["merit function / tolerance data"] = merit_lines
+        zf.ignored[_MERIT] = merit_lines
     return zf
 
 
@@ -249,9 +283,9 @@ def _surface_operand(zf: ZFile, s: ZSurface, op: str, tokens: list[str], line: i
     elif op == "DISZ":
         s.thickness = _num(tokens, 1, line, src)
     elif op == "PARM":
-        s.parm[int(_num(tokens, 1, line, src))] = _num(tokens, 2, line, src)
+        s.parm[_index(tokens, 1, line, src)] = _num(tokens, 2, line, src)
     elif op == "XDAT":
-        s.xdat[int(_num(tokens, 1, line, src))] = _num(tokens, 2, line, src)
+        s.xdat[_index(tokens, 1, line, src)] = _num(tokens, 2, line, src)
     elif op == "GLAS":
         s.glass, s.glass_line = tokens[1:], line
     elif op == "STOP":
@@ -264,6 +298,8 @@ def _surface_operand(zf: ZFile, s: ZSurface, op: str, tokens: list[str], line: i
         s.flap = True
         if len(tokens) > 2:
             s.diam = _num(tokens, 2, line, src)
+    elif op == "IGNR" and len(tokens) > 1 and tokens[1] not in ("0", "0.0"):
+        s.ignored.append("IGNR (Zemax skips this surface when tracing; lensopt traces it)")
     elif op == "COMM":
         s.comment = raw.strip()[4:].strip() or None
     elif op in _APERTURE_IGNORED:
@@ -332,6 +368,7 @@ def _lens_surfaces(zf: ZFile, catalogs: Any, extras: dict[str, Any], warnings: l
     surf_extras = extras.get("surfaces") if isinstance(extras.get("surfaces"), dict) else {}
     gcat = [t.upper() for _, tokens in zf.system.get("GCAT", []) for t in tokens[1:]]
     out: list[dict[str, Any]] = []
+    plain = 0  # non-COORDBRK blocks so far: the key of export_zemax's per-surface NOTE data
     lens = zf.surfaces[1:-1]
     if not any(s.stop for s in lens):
         warnings.append("no STOP in the file: surface 1 is taken as the aperture stop (Zemax's default)")
@@ -353,7 +390,8 @@ def _lens_surfaces(zf: ZFile, catalogs: Any, extras: dict[str, Any], warnings: l
             out[-1]["thickness"] += s.thickness * scale
             continue
         i = len(out)
-        extra = surf_extras.get(str(i + 1), {}) if isinstance(surf_extras, dict) else {}
+        plain += 1
+        extra = surf_extras.get(str(plain), {}) if isinstance(surf_extras, dict) else {}
         extra = extra if isinstance(extra, dict) else {}
         surf = _surface(zf, s, scale, catalogs, gcat, extra, warnings)
         surf["stop"] = s.stop or (not any(t.stop for t in lens) and i == 0)
@@ -406,7 +444,7 @@ def _surface(zf: ZFile, s: ZSurface, scale: float, catalogs: Any, gcat: list[str
     surf["thickness"] = s.thickness * scale
     if not math.isfinite(surf["thickness"]):
         raise SpecError(f"line {s.line}: surface {s.number} has an infinite thickness", path=src)
-    surf["material"] = _material(zf, s, catalogs, gcat, extra, warnings)
+    surf["material"] = material(zf, s, catalogs, gcat, extra, warnings)
     if s.clap is not None:
         rmin, rmax = s.clap
         if rmin > 0:
@@ -452,117 +490,3 @@ def _binary2(zf: ZFile, s: ZSurface, scale: float, extra: dict[str, Any], where:
     if isinstance(wl, int | float) and wl > 0:
         out["design_wavelength_nm"] = float(wl)
     return out
-
-
-def _material(zf: ZFile, s: ZSurface, catalogs: Any, gcat: list[str], extra: dict[str, Any],
-              warnings: list[str]) -> Any:
-    src = zf.source
-    if not s.glass:
-        return "air"
-    name = s.glass[0]
-    where = f"line {s.glass_line}: surface {s.number}"
-    upper = name.upper()
-    if upper == "AIR":
-        return "air"
-    if upper == "MIRROR":
-        raise SpecError(f"{where}: mirrors (GLAS MIRROR) are not supported: lensopt traces refractive systems only",
-                        path=src)
-    if upper == "___BLANK":
-        values = [t for t in s.glass[1:]]
-        try:
-            nd, vd = float(values[2]), float(values[3])
-            dpgf = float(values[4]) if len(values) > 4 else 0.0
-        except (IndexError, ValueError):
-            raise SpecError(f"{where}: a model glass (___BLANK) needs nd and vd", path=src) from None
-        model = {"nd": nd, "vd": vd, "dpgf": dpgf}
-        ex = extra.get("material")
-        if isinstance(ex, dict) and all(ex.get(k) == v for k, v in model.items()) and set(ex) <= {
-                "nd", "vd", "dpgf", "name"}:
-            return ex
-        if isinstance(ex, str):
-            try:
-                from lensopt.materials import material_from_name
-
-                mat = material_from_name(ex)
-                if (mat.nd, mat.vd) == (nd, vd) and dpgf == 0.0:
-                    return ex
-            except LensoptError:
-                pass
-        return model
-    ex = extra.get("material")
-    if isinstance(ex, dict) and set(ex) == {"catalog", "glass"} and normalize_name(str(ex["glass"])) == \
-            normalize_name(name):
-        try:
-            agf_glass(ex["catalog"], name)
-            return ex
-        except LensoptError:
-            pass
-    for c in catalogs:
-        try:
-            glass = agf_glass(c, name)
-        except LensoptError:
-            continue
-        return {"catalog": str(Path(c).resolve()), "glass": glass.entry.name}
-    vendors = [_VENDORS[g] for g in gcat if g in _VENDORS] + [
-        _VENDORS[k] for g in gcat for k in _VENDORS if g.startswith(k) and g not in _VENDORS]
-    nd_file, vd_file = _file_nd_vd(s.glass)
-    candidates = []
-    for v in vendors:
-        try:
-            candidates.append(find_glass(f"{v}:{name}"))
-        except LensoptError:
-            continue
-    if not candidates:
-        try:
-            candidates.append(find_glass(name))
-        except LensoptError:
-            cats = f" (GCAT {' '.join(gcat)})" if gcat else ""
-            raise SpecError(f"{where}: unknown glass {name!r}{cats}: not in lensopt's catalogs; give its AGF "
-                            "catalog with --catalog FILE.agf", path=src) from None
-    found = candidates[0]
-    if nd_file is not None and (nd_file, vd_file) == (1.5, 40.0):
-        nd_file = None  # what older Zemax versions write for a catalog glass: a placeholder, not data
-    if nd_file is not None and len(candidates) > 1 and min(abs(g.nd - nd_file) for g in candidates) <= 1e-3:
-        # A name in several catalogs (F2: Schott and Hikari): the GLAS line's nd/vd pick the one meant.
-        found = min(candidates, key=lambda g: abs(g.nd - nd_file) + abs(g.vd - (vd_file or g.vd)) / 100)
-    ex = extra.get("material")
-    if isinstance(ex, str):
-        try:
-            if find_glass(ex) == found:
-                return ex
-        except LensoptError:
-            pass
-    if nd_file is not None and abs(nd_file - found.nd) > 1e-3:
-            warnings.append(f"surface {s.number}: glass {name} resolved to {found.label} with nd {found.nd:.5f}; the "
-                            f"file says nd {nd_file:.5f}")
-    return f"{found.vendor}:{found.name}"
-
-
-def _file_nd_vd(glass: list[str]) -> tuple[float | None, float | None]:
-    """nd and vd from a GLAS line (``GLAS name a b nd vd …``), None where absent or not a real index."""
-    try:
-        nd = float(glass[3])
-        vd = float(glass[4]) if len(glass) > 4 else None
-    except (IndexError, ValueError):
-        return None, None
-    return (nd, vd) if nd > 1.0 else (None, None)
-
-
-def _range_warnings(spec: Any, warnings: list[str]) -> None:
-    """One warning per AGF glass used outside its catalog wavelength range."""
-    from lensopt.spec.build import resolve_material
-
-    wl_um = [w * 1e-3 for w in spec.spectrum.wavelengths_nm]
-    seen: set[str] = set()
-    for i, surf in enumerate(spec.surfaces):
-        if isinstance(surf.material, str) or not hasattr(surf.material, "catalog"):
-            continue
-        mat = resolve_material(surf.material, path=f"surfaces[{i}].material")
-        if not isinstance(mat, AgfGlass) or normalize_name(mat.label) in seen:
-            continue
-        seen.add(normalize_name(mat.label))
-        outside = mat.outside_range(wl_um)
-        if outside:
-            lo, hi = mat.valid_range_um
-            warnings.append(f"glass {mat.label}: wavelength(s) {', '.join(f'{w * 1e3:g}' for w in outside)} nm outside "
-                            f"its catalog range {lo * 1e3:g}–{hi * 1e3:g} nm (the formula is extrapolated)")

@@ -122,6 +122,8 @@ def _spectrum(zf: Any, n_waves: int | None, warnings: list[str]) -> dict[str, An
     for line, tokens in zf.system.get("WAVM", []):
         try:
             slots[int(tokens[1])] = (float(tokens[2]), float(tokens[3]) if len(tokens) > 3 else 1.0)
+            if not all(math.isfinite(v) for v in slots[int(tokens[1])]):
+                raise ValueError
         except (IndexError, ValueError):
             raise SpecError(f"line {line}: WAVM needs a slot number and a wavelength in µm", path=src) from None
     if not slots:
@@ -136,14 +138,17 @@ def _spectrum(zf: Any, n_waves: int | None, warnings: list[str]) -> dict[str, An
             warnings.append(f"FTYP declares {n_waves} wavelengths but the file gives {len(order)} (truncated?)")
         order = [k for k in order if k <= n_waves]
     pw_item = zf.last("PWAV")
-    primary = int(float(pw_item[1][1])) if pw_item and len(pw_item[1]) > 1 else order[0]
+    try:
+        primary = int(float(pw_item[1][1])) if pw_item and len(pw_item[1]) > 1 else order[0]
+    except (ValueError, OverflowError):
+        raise SpecError(f"line {pw_item[0]}: PWAV needs a wavelength number", path=src) from None
     if primary not in order:
         raise SpecError(f"primary wavelength PWAV {primary} is not one of the wavelengths in use", path=src)
     wl_nm: list[float] = []
     weights_out: list[float] = []
-    ref_nm = slots[primary][0] * 1e3
+    ref_nm = _nm(slots[primary][0])
     for k in order:
-        w_nm = slots[k][0] * 1e3
+        w_nm = _nm(slots[k][0])
         if not w_nm > 0:
             raise SpecError(f"wavelength {k} must be positive (got {slots[k][0]} µm)", path=src)
         if w_nm in wl_nm:
@@ -185,6 +190,10 @@ def _fields(zf: Any, kind: int, n_fields: int | None, object_distance: float | N
     if n_fields is not None and len(ys) < n_fields:
         warnings.append(f"FTYP declares {n_fields} fields but YFLN gives {len(ys)} (truncated?)")
     ys, xs = ys[:n], (xs + [0.0] * n)[:n]
+    if n_fields is None:  # old files without FTYP list 12 slots: drop the unused (zero) ones at the end
+        while len(ys) > 1 and ys[-1] == 0 and xs[-1] == 0:
+            ys, xs = ys[:-1], xs[:-1]
+        n = len(ys)
     scale = zf.scale
     if any(x != 0 for x in xs):
         warnings.append("x fields taken at their radial distance (lensopt is rotationally symmetric)")
@@ -362,3 +371,8 @@ def _fnumber_from_extras(epd: float, fo: Any, extras: dict[str, Any]) -> dict[st
         if abs(implied - epd) <= _AGREE * 10 * epd:
             return {"fnumber": float(fnumber)}
     return {"epd": epd}
+
+
+def _nm(um: float) -> float:
+    """µm → nm, to 12 significant digits (0.58756180000000002 µm is 587.5618 nm, not 587.5618000000001)."""
+    return float(f"{um * 1e3:.12g}")

@@ -243,7 +243,7 @@ def parse_agf(text: str, *, catalog: str, source: str) -> dict[str, AgfEntry]:
                 current["coefficients"] = tuple(_float(t) for t in tokens[1:])
             elif key == "LD" and len(tokens) >= 3:
                 current["range_um"] = (_float(tokens[1]), _float(tokens[2]))
-        except (IndexError, ValueError):
+        except (IndexError, ValueError, OverflowError):
             raise MaterialError(f"line {number}: malformed {key} record: {raw.strip()[:60]!r}", path=source) from None
     flush()
     if not out:

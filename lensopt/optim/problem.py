@@ -115,7 +115,7 @@ class Problem:
         ]
         self.failure_penalty = cons.ray_failure.penalty_mm or alpha
         self.theta0 = self.param.initial()
-        if self.objective == "raw":
+        if self.objective in ("raw", "restored"):  # "restored": optim.joint replaces it with RestoredObjective
             mode = "scalar" if (method or self.opt.optimizer) == "adam" else "gtra"
             self.image = ImageObjective(self.spec, self.system, self.opt.image or ImageSpec(), mode=mode,
                                         dtype=image_dtype)

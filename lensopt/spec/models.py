@@ -15,6 +15,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from lensopt.spec.optim import OptimizeSpec
+from lensopt.spec.restore import RestoreSpec
 from lensopt.spec.tolerance import ToleranceSpec
 
 __all__ = [
@@ -506,7 +507,8 @@ class CheckSpec(_Model):
 
 class LensSpec(_Model):
     """A complete lens: system, spectrum, optional sensor, surfaces in order, image, and the optional
-    ``[optimize]`` section read by ``lensopt optimize`` (see ``lensopt.spec.optim``)."""
+    ``[optimize]`` section read by ``lensopt optimize`` (see ``lensopt.spec.optim``) and the optional
+    ``[restore]`` section of the restoration network (``lensopt.spec.restore``)."""
 
     name: str = "lens"
     system: SystemSpec
@@ -518,6 +520,7 @@ class LensSpec(_Model):
     optimize: OptimizeSpec | None = None
     tolerance: ToleranceSpec | None = None
     check: CheckSpec | None = None
+    restore: RestoreSpec | None = None
 
     @model_validator(mode="after")
     def _structure(self) -> LensSpec:

@@ -307,7 +307,8 @@ class OptimizeSpec(_Model):
         optimizer: ``lm`` or ``adam`` (the CLI's --optimizer overrides).
         objective: ``spot`` (TRA, spot size; the default, also when None) or ``raw`` (MSE of the simulated
             capture against the scene, through GTRA for LM, S3.1; needs ``[sensor]``; rendering set by
-            ``image``).
+            ``image``) or ``restored`` (MSE after the restoration network of ``[restore]``, lens and network
+            optimized jointly, S3.3; LM only).
         image: ``[optimize.image]``, the rendering of training batches for image objectives.
     """
 
@@ -321,7 +322,7 @@ class OptimizeSpec(_Model):
     bind_at: float = Field(default=0.5, ge=0, le=1)
     steps: int = Field(default=500, ge=1)
     optimizer: Literal["lm", "adam"] = "lm"
-    objective: Literal["spot", "raw"] | None = None
+    objective: Literal["spot", "raw", "restored"] | None = None
     image: ImageSpec | None = None
     solves: list[Annotated[SolveSpec, Field()]] = Field(default_factory=list)
     tra: TraSpec = Field(default_factory=TraSpec)

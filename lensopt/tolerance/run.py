@@ -18,10 +18,10 @@ from torch import Tensor
 
 from lensopt.optics.lens import Lens, System
 from lensopt.tolerance.evaluate import EvalSetup, evaluate
-from lensopt.tolerance.model import Tolerance, TrialParams, draw, nominal_params, perturb
+from lensopt.tolerance.model import Tolerance, TrialParams, draw, perturb
 
 __all__ = ["Job", "run_trials", "sensitivity", "monte_carlo", "yield_table", "rss_prediction", "scalar_metric",
-           "LEVELS", "HIGHER_IS_BETTER", "MonteCarlo", "SensitivityRow", "moments"]
+           "LEVELS", "HIGHER_IS_BETTER", "MonteCarlo", "SensitivityRow", "moments", "nominal_metrics"]
 
 LEVELS = (0.5, 0.8, 0.9, 0.95, 0.99)
 HIGHER_IS_BETTER = {"esr": False, "rms": False, "mtf": True, "distortion": False}
@@ -326,10 +326,3 @@ def monte_carlo(job: Job, num_trials: int, seed: int, *, scheduler: str | None =
 def nominal_metrics(job: Job) -> dict[str, np.ndarray]:
     """The nominal lens's metrics with the compensator (one trial of zeros)."""
     return run_trials(job, torch.zeros(1, len(job.tols), dtype=torch.float64))
-
-
-def job_summary(job: Job) -> dict[str, Any]:
-    p, _ = nominal_params(job.lens)
-    return {"tolerances": len(job.tols), "surfaces": job.lens.num_surfaces, "rays_per_trial": int(
-        job.setup.pupil.shape[0] * job.lens.wavelength_um.shape[0] * len(job.system.rel_field)),
-        "trial_tensor_shape": list(p.curvature.shape)}

@@ -56,3 +56,12 @@ def test_trace_report_esr_uses_the_spec_field_weights():
                                          "weights": [1.0, 0.0, 3.0]}), sampling)
     expected = ((sr[0] ** 2 + 3 * sr[2] ** 2) / 4) ** 0.5
     assert weighted["effective_spot_radius_um"] == pytest.approx(expected, rel=1e-12)
+
+
+def test_ray_at_a_wavelength_outside_a_glass_range_names_the_surface():
+    # ray_report re-indexes the media at the asked wavelength (no spec rebuild): the glass's valid range
+    # is still checked, and the error names the surface's material (Cooke: SK16 catalog data 0.4–0.7 µm).
+    from lensopt.errors import LensoptError
+
+    with pytest.raises(LensoptError, match=r"surfaces\[0\]\.material: wavelength 2.5 µm is outside"):
+        ray_report(cooke(), field_deg=0.0, px=0.0, py=1.0, wavelength_nm=2500.0)

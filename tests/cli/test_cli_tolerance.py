@@ -14,8 +14,8 @@ from lensopt.analysis.mtf import lens_mtf
 from lensopt.cli import app
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
+from lensopt.spec.tolerance_build import make_job
 from lensopt.tolerance.run import monte_carlo
-from lensopt.tolerance.setup import make_job
 
 ROOT = Path(__file__).resolve().parents[2]
 CMOUNT = ROOT / "lenses" / "cmount_4p.json"

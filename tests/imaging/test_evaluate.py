@@ -81,7 +81,7 @@ def test_scores_equal_lensopt_simulate_on_the_same_tile(tmp_path: Path) -> None:
         exr = tmp_path / f"scene{k}.exr"  # float EXR: read back linear, bit for bit
         write_image(exr, src.scene(k, 64, 64).permute(1, 2, 0).numpy(), ImageInfo(64, 64, 3, 32, True, "linear", "exr"))
         r = runner.invoke(app, ["simulate", str(CMOUNT), str(exr), "-o", str(tmp_path / f"o{k}.exr"), "--region",
-                                item.tile, "--rays", "rings:8", "--json"])
+                                item.tile, "--rays", "rings:8", "--json", "--score"])
         assert r.exit_code == 0, r.output
         m = json.loads(r.stdout)["metrics"]
         assert m["psnr_db"] == pytest.approx(item.psnr_db, abs=1e-9)
@@ -124,3 +124,4 @@ def test_bad_input_is_one_line_exit_2(tmp_path: Path, args: list[str], path: str
 def test_lens_without_sensor_is_one_line_exit_2() -> None:
     r = runner.invoke(app, ["evaluate", str(ROOT / "specs" / "double_gauss.toml"), "--count", "1"])
     assert r.exit_code == 2 and r.stderr.startswith("error: sensor:"), r.output
+    assert "give [sensor] pixel_pitch_um" in r.stderr  # the message's brackets survive rich's markup

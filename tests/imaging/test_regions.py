@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -87,3 +88,23 @@ def test_rings_and_errors() -> None:
         tile_grid(Sensor(0.001, 100, 100), 256)
     with pytest.raises(LensoptError, match="positive"):
         tile_grid(Sensor(0.001, 100, 100), 0)
+
+
+def test_plot_regions_figure_and_cli(tmp_path) -> None:
+    from matplotlib.patches import Rectangle
+    from typer.testing import CliRunner
+
+    from lensopt.cli import app
+    from lensopt.plot.regions import plot_regions
+
+    g = tile_grid(Sensor(0.001, 8192, 6144), 256)
+    draw = RegionSampler(g, seed=0).sample(16)
+    fig = plot_regions(g, draw)
+    boxes = [p for p in fig.axes[0].patches if isinstance(p, Rectangle)]
+    assert len(boxes) == 16  # one outline per drawn tile (16 distinct tiles: one per stratum)
+    assert {(b.get_x(), b.get_y()) for b in boxes} == {tuple(g.origin_px[int(k)].tolist()) for k in draw}
+    out = tmp_path / "regions.png"
+    spec = str(Path(__file__).resolve().parents[2] / "specs" / "cooke_triplet.toml")
+    r = CliRunner().invoke(app, ["plot", "regions", spec, "-o", str(out), "--patch", "500", "--batch", "8"])
+    assert r.exit_code == 0, r.output
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

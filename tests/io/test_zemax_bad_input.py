@@ -110,3 +110,43 @@ def test_cli_exit_codes_and_no_partial_output(tmp_path: Path) -> None:
     zmx = tmp_path / "back.zmx"
     res = runner.invoke(app, ["export-zemax", str(out), "-o", str(zmx)])
     assert res.exit_code == 0 and zmx.exists()
+
+
+def test_environment_and_configurations_are_one_warning_each() -> None:
+    text = LENS1.replace("MODE SEQ\n", "MODE SEQ\nENVD 35 1 0\n").replace("SURF 8\n", "MNUM 3 1\nSURF 8\n")
+    warnings = import_zemax(text).warnings
+    assert sum("ENVD 35" in w for w in warnings) == 1
+    assert sum("3 configurations" in w for w in warnings) == 1
+    assert not any("ENVD" in w for w in import_zemax(LENS1.replace("MODE SEQ\n", "MODE SEQ\nENVD 20 1 0\n")).warnings)
+
+
+def test_catalog_glass_outside_its_range_points_to_agf(tmp_path: Path) -> None:
+    text = _edit("WAVM 3 0.65627250000000004 1", "WAVM 3 3.5 1")  # 3.5 µm: beyond Schott's data
+    with pytest.raises(SpecError, match="outside the valid range.*--catalog"):
+        import_zemax(text)
+
+
+def test_truncated_or_garbled_files_fail_with_one_line_only() -> None:
+    # Every truncation of a real file (at a line end and in mid-line) and random garbled numbers either
+    # import or raise the one-line LensoptError; nothing else escapes (IndexError, ValueError, ...).
+    import random
+
+    from lensopt.errors import LensoptError
+
+    lines = LENS1.splitlines(keepends=True)
+    texts = ["".join(lines[:k]) for k in range(1, len(lines))]
+    texts += ["".join(lines[:k]) + lines[k][: len(lines[k]) // 2] for k in range(1, len(lines))]
+    rnd = random.Random(0)
+    for _ in range(60):
+        ls = list(lines)
+        i = rnd.randrange(len(ls))
+        tokens = ls[i].split()
+        if len(tokens) > 1:
+            tokens[rnd.randrange(1, len(tokens))] = rnd.choice(["x", "-1", "0", "1e400", "nan"])
+            ls[i] = " ".join(tokens) + "\n"
+            texts.append("".join(ls))
+    for text in texts:
+        try:
+            import_zemax(text)
+        except LensoptError as err:
+            assert "\n" not in str(err)

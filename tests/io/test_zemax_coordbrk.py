@@ -106,3 +106,18 @@ def test_basic_decenters_export_as_coordinate_breaks_and_come_back() -> None:
     pa = trace_bundle(a.lens, a.system, pts).result.pos
     pb = trace_bundle(b.lens, b.system, pts).result.pos
     assert float((pa - pb).abs().max()) <= 1e-10
+
+
+def test_lensopt_notes_stay_with_their_surfaces_after_a_break() -> None:
+    from lensopt.io.zemax_export import export_zemax
+    from lensopt.spec import load_spec
+
+    spec = load_spec(Path(__file__).resolve().parents[2] / "specs" / "cooke_triplet.toml")
+    surfaces = list(spec.surfaces)
+    surfaces[2] = surfaces[2].model_copy(update={"decenter": (0.0, 0.1), "decenter_mode": "basic"})
+    moved = spec.model_copy(update={"surfaces": surfaces})
+    back = import_zemax(export_zemax(moved)).spec
+    assert len(back.surfaces) == len(spec.surfaces) + 1  # the break's dummy plane
+    originals = [s.material for s in spec.surfaces]
+    imported = [s.material for s in back.surfaces if not (s.label or "").startswith("COORDBRK")]
+    assert imported == originals

@@ -35,6 +35,7 @@ TRACED = {
     # file: (catalogs, what it shows)
     "optiland_lens1.zmx": ((), "Cooke-like triplet, ENPD, angle fields, Schott glasses"),
     "optiland_lens_floa.zmx": ((), "FLOA (aperture from the stop's semi-diameter)"),
+    "optiland_lens_thorlabs_iso_8859_1.zmx": ((), "Thorlabs AL1815-C: EVENASPH r⁴…r¹⁶ with a conic, FLAP, Latin-1"),
     "rayoptics_US00583336-2-scaled.zmx": ((), "double Gauss: FNUM, vignetting VDYN/VCYN/VCXN, FLAP apertures"),
     "rayoptics_US08427765-1.zmx": ((AGF,), "EVENASPH, FLAP apertures, real-image-height fields, an AGF glass"),
 }
@@ -149,3 +150,66 @@ def test_glass_indices_agree_with_optilands_catalog() -> None:
         ref = Material(name, "schott")
         for j, x in enumerate(wl):
             assert float(model.lens.index[i + 1, j]) == pytest.approx(float(np.ravel(ref.n(x))[0]), abs=2e-5)
+
+
+def _finite(aperture: str) -> str:
+    # optiland_lens1.zmx at a finite object (200 mm) with object-height fields (FTYP 1) and another aperture.
+    text = (DATA / "optiland_lens1.zmx").read_text().replace("ENPD 8.333333969116211", aperture)
+    text = text.replace("  DISZ INFINITY", "  DISZ 200").replace("FTYP 0 0 3 3", "FTYP 1 0 3 3")
+    return text.replace("YFLN 0.0 8.485281610363037 12.000000333930423", "YFLN 0 10 20")
+
+
+@pytest.mark.parametrize("aperture", ["OBNA 0.05 0", "FNUM 3.5 0"])
+def test_object_na_and_object_height_fields_match_optiland(tmp_path: Path, aperture: str) -> None:
+    from optiland.fileio.zemax.reader.converter import ZemaxToOpticConverter
+    from optiland.fileio.zemax.reader.parser import ZemaxDataParser
+
+    from lensopt.io.zemax_import import import_zemax
+
+    text = _finite(aperture)
+    model = build(import_zemax(text).spec)
+    path = tmp_path / "finite.zmx"
+    path.write_text(text)
+    be.set_precision("float64")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        optic = ZemaxToOpticConverter(ZemaxDataParser(str(path)).parse()).convert()
+    w = model.system.reference
+    for surf, n in zip(optic.surfaces.surfaces[:-1], model.lens.index[:, w].tolist(), strict=True):
+        surf.material_post = IdealMaterial(n)
+    fo = first_order(model.lens, model.system)
+    assert float(fo.epd) == pytest.approx(float(np.ravel(optic.paraxial.EPD())[0]), rel=REL_TOL)
+    # Chief rays of the object-height fields (0, 10, 20 mm): same image heights in both programs.
+    bundle = trace_bundle(model.lens, model.system, torch.zeros(1, 2, dtype=torch.float64))
+    ours = bundle.result.pos[:, w, 0, 1].abs().tolist()
+    wl = model.lens.wavelength_um[w].item()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        theirs = [abs(float(np.ravel(optic.trace_generic(0.0, h, 0.0, 0.0, wl).y)[0])) for h in (0.0, 0.5, 1.0)]
+    assert ours == pytest.approx(theirs, abs=MM_TOL)
+
+
+def test_paraxial_working_fnumber() -> None:
+    from lensopt.io.zemax_import import import_zemax
+
+    model = build(import_zemax(_finite("FNUM 3.5 1")).spec)
+    assert float(first_order(model.lens, model.system).working_fnumber) == pytest.approx(3.5, rel=1e-12)
+
+
+def test_vignetting_factors_follow_zemax_definition() -> None:
+    # OpticStudio: the pupil coordinate y becomes VDY + (1 − VCY) y, x becomes VDX + (1 − VCX) x. The
+    # double Gauss's VDYN/VCYN/VCXN applied by lensopt (S19–S20) map the pupil's edges there.
+    from lensopt.optics.vignetting import apply_vignetting
+
+    lens = _import("rayoptics_US00583336-2-scaled.zmx")
+    model = build(lens.spec)
+    vdy = [0.0, 6.208442661354e-2, 5.473246586901e-2]
+    vcy = [0.0, 1.556542586327e-1, 3.64762539196e-1]
+    vcx = [0.0, 2.455956935883e-3, 2.0477435112e-3]
+    factors = torch.tensor(model.system.vignetting, dtype=torch.float64).unsqueeze(1)  # (F, 1, 3)
+    edges = torch.tensor([[0.0, 1.0], [0.0, -1.0], [1.0, 0.0]], dtype=torch.float64).expand(3, 1, 3, 2)
+    got = apply_vignetting(edges, factors)[:, 0]
+    for f in range(3):
+        assert float(got[f, 0, 1]) == pytest.approx(vdy[f] + (1 - vcy[f]), abs=1e-15)
+        assert float(got[f, 1, 1]) == pytest.approx(vdy[f] - (1 - vcy[f]), abs=1e-15)
+        assert float(got[f, 2, 0]) == pytest.approx(1 - vcx[f], abs=1e-15)

@@ -20,9 +20,9 @@ import torch
 from lensopt.optics.paraxial import first_order
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
+from lensopt.spec.tolerance_build import make_job
 from lensopt.tolerance.evaluate import evaluate
 from lensopt.tolerance.model import params_lens
-from lensopt.tolerance.setup import make_job
 
 ROOT = Path(__file__).resolve().parents[2]
 

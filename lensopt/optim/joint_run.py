@@ -1,0 +1,210 @@
+"""A whole joint run (``lensopt optimize`` with ``objective = "restored"``): problem and network set-up,
+checkpoints every N steps and at a stop (Ctrl-C / SIGTERM at a step boundary), ``--resume``,
+validation on held-out patches, TensorBoard scalars, and torch.distributed data parallelism."""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from lensopt.errors import LensoptError
+from lensopt.io.checkpoint import (
+    Checkpoint,
+    CheckpointError,
+    fingerprint,
+    flatten_optimizer,
+    lens_structure,
+    load_checkpoint,
+    save_checkpoint,
+    unflatten_optimizer,
+)
+from lensopt.optim.irm import make_optimizer
+from lensopt.optim.joint import Dist, RestoredObjective, evaluate_pair, joint_step
+from lensopt.optim.lm import LevenbergMarquardt, Trial
+from lensopt.optim.problem import Problem
+from lensopt.optim.writeback import to_spec
+from lensopt.restore.config import RestoreConfig, TrainConfig, configs_from_spec
+from lensopt.restore.model import ConditionedRestorer
+
+__all__ = ["JointResult", "prepare_spec", "run_joint"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class JointResult:
+    spec: Any
+    steps: int
+    interrupted: bool
+    history: list[dict[str, Any]] = field(default_factory=list)
+    start: dict[str, float] | None = None
+    final: dict[str, float] | None = None
+    elapsed_s: float = 0.0
+    notes: list[str] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def prepare_spec(spec: Any) -> tuple[Any, list[str]]:
+    """The spec for a joint run: glass variables are frozen (glasses are chosen by the spot or raw
+    runs before, S6.2), the optimizer is LM. Returns (spec, notes)."""
+    notes = []
+    spec = spec.model_copy(deep=True)
+    frozen = [i for i, s in enumerate(spec.surfaces) if "material" in s.vary]
+    for i in frozen:
+        spec.surfaces[i].vary = [v for v in spec.surfaces[i].vary if v != "material"]
+    if frozen:
+        notes.append(f"glass variables frozen for the joint run (surfaces {frozen})")
+    if spec.optimize.optimizer != "lm":
+        notes.append("objective restored uses Levenberg–Marquardt for the lens")
+    return spec, notes
+
+
+def _settings(spec: Any, net: RestoreConfig, cfg: TrainConfig, world: int) -> dict[str, Any]:
+    img = spec.optimize.image
+    return {"image": img.model_dump(mode="json") if img is not None else None, "network": net.to_dict(),
+            "adam": {"lr": cfg.lr, "betas": list(cfg.betas), "lr_min": cfg.lr_min},
+            "lm": spec.optimize.lm.model_dump(mode="json"), "world": world}
+
+
+def run_joint(
+    start_spec: Any,
+    *,
+    steps: int | None = None,
+    seed: int = 0,
+    checkpoint: Path | None = None,
+    resume: bool = False,
+    device: torch.device | str = "cpu",
+    log_dir: Path | None = None,
+    dist: Dist | None = None,
+    stop: Callable[[], bool] = lambda: False,
+    on_progress: Callable[[dict[str, Any]], None] | None = None,
+    checkpoint_every: int | None = None,
+    validate_every: int | None = None,
+    evaluate: bool = True,
+) -> JointResult:
+    """Optimize the lens of ``start_spec`` jointly with a restoration network (S3.3.1)."""
+    t_start = time.perf_counter()
+    dist = dist or Dist()
+    spec, notes = prepare_spec(start_spec)
+    net_cfg, cfg = configs_from_spec(spec.restore)
+    net_cfg = RestoreConfig(**{**net_cfg.to_dict(), "channels": 3})
+    total = steps if steps is not None else spec.optimize.steps
+    ck_every = cfg.checkpoint_every if checkpoint_every is None else checkpoint_every
+    val_every = cfg.validate_every if validate_every is None else validate_every
+    problem = Problem(spec, seed=seed, method="lm")
+    if problem.num_variables == 0:
+        raise LensoptError("nothing to optimize: no surface has a vary list", path="surfaces")
+    torch.manual_seed(seed)
+    net = ConditionedRestorer(net_cfg).to(device)
+    adam = make_optimizer(net, cfg)
+    model: torch.nn.Module = net
+    if dist.active:
+        from torch.nn.parallel import DistributedDataParallel
+
+        model = DistributedDataParallel(net)
+    obj = RestoredObjective(problem.spec, problem.system, spec.optimize.image, model, dist=dist, device=device)
+    problem.image = obj
+
+    def evaluate_fn(t: torch.Tensor) -> Trial:
+        ev = problem.evaluate(t)
+        return Trial(ev.residuals, ev.physical, ev.reason)
+
+    lm = LevenbergMarquardt(problem.theta0, problem.jacobian, evaluate_fn, problem.opt.lm)
+    start_ev = problem.evaluate(problem.theta0)
+    if not start_ev.physical:
+        raise LensoptError(f"the start lens cannot be optimized: {start_ev.reason}")
+    settings = _settings(spec, net_cfg, cfg, dist.world)
+    img = spec.optimize.image
+    settings["imaging"] = {"fields": img.fields, "psf_size": img.psf_size, "grid": list(img.grid), "patch": img.patch,
+                           "sampling": img.sampling}
+    settings = json.loads(json.dumps(settings))
+    fp = fingerprint(lens_structure(spec), net_cfg.to_dict())
+    history: list[dict[str, Any]] = []
+    step = 0
+    if resume:
+        if checkpoint is None:
+            raise LensoptError("needs --checkpoint", path="--resume")
+        ck = load_checkpoint(checkpoint, expect_fingerprint=fp, option="--resume")
+        if ck.kind != "joint":
+            raise CheckpointError(f"is a {ck.kind} checkpoint, not a joint one", path="--resume", got=str(checkpoint))
+        if ck.meta.get("settings") != json.loads(json.dumps(settings)):
+            raise CheckpointError("was written with other [optimize.image], [restore], LM settings or process count",
+                                  path="--resume", got=str(checkpoint))
+        if ck.meta.get("start_spec") != json.loads(start_spec.model_dump_json()):
+            raise CheckpointError("was written for another start lens", path="--resume", got=str(checkpoint))
+        net.load_state_dict({k: v.to(device) for k, v in ck.network.items()})
+        adam.load_state_dict(unflatten_optimizer("adam", {k: v.to(device) for k, v in ck.state.items()},
+                                                 ck.meta["adam"]))
+        lm.theta = ck.state["lm.theta"].to(lm.theta.dtype)
+        lm.D = ck.state.get("lm.D")
+        m = ck.meta["lm"]
+        lm.damping, lm.accepted, lm.rejected, lm.history = m["damping"], m["accepted"], m["rejected"], m["history"]
+        step, history = ck.step, list(ck.meta.get("history", []))
+    elif checkpoint is not None and checkpoint.exists():
+        raise CheckpointError("exists; pass --resume to continue it or choose another --checkpoint",
+                              path="--checkpoint", got=str(checkpoint))
+
+    def save() -> None:
+        if checkpoint is None or dist.rank != 0:
+            return
+        opt_t, opt_info = flatten_optimizer("adam", adam.state_dict())
+        state = dict(opt_t)
+        state["lm.theta"] = lm.theta
+        if lm.D is not None:
+            state["lm.D"] = lm.D
+        meta = {"adam": opt_info, "settings": settings, "history": history, "network_config": net_cfg.to_dict(),
+                "start_spec": json.loads(start_spec.model_dump_json()),
+                "lm": {"damping": lm.damping, "accepted": lm.accepted, "rejected": lm.rejected,
+                       "history": list(lm.history)}}
+        cur = to_spec(problem, lm.theta)
+        save_checkpoint(checkpoint, Checkpoint(kind="joint", step=step, lens_json=cur.model_dump_json(indent=2),
+                                               network=dict(net.state_dict()), state=state, meta=meta,
+                                               fingerprint=fp))
+
+    writer = None
+    if log_dir is not None and dist.rank == 0:
+        from torch.utils.tensorboard import SummaryWriter
+
+        writer = SummaryWriter(str(log_dir))
+    count = spec.optimize.image.validation
+    res = JointResult(spec=spec, steps=step, interrupted=False, notes=notes)
+    if evaluate:
+        res.start = evaluate_pair(obj, problem.lens(lm.theta)[0], net, count)
+    try:
+        while step < total:
+            if stop():
+                res.interrupted = True
+                break
+            rec = joint_step(problem, lm, obj, model, adam, step, total, lr=cfg.lr, lr_min=cfg.lr_min, dist=dist,
+                             timings=res.timings)
+            step += 1
+            rec["esr_um"] = 1e3 * problem.spot_esr_mm(lm.theta)
+            if val_every and (step % val_every == 0 or step == total):
+                rec.update(evaluate_pair(obj, problem.lens(lm.theta)[0], net, count))
+            history.append(rec)
+            if writer is not None:
+                for k, v in rec.items():
+                    if k != "step" and isinstance(v, (int, float)):
+                        writer.add_scalar(f"joint/{k}", float(v), rec["step"])
+            if on_progress is not None:
+                on_progress(rec)
+            if ck_every and step % ck_every == 0:
+                save()
+    finally:
+        if writer is not None:
+            writer.close()
+    save()
+    res.steps, res.history = step, history
+    res.spec = to_spec(problem, lm.theta)
+    res.spec.restore = spec.restore
+    if evaluate and not res.interrupted:
+        res.final = evaluate_pair(obj, problem.lens(lm.theta)[0], net, count)
+    res.elapsed_s = time.perf_counter() - t_start
+    return res
