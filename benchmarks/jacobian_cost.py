@@ -22,6 +22,7 @@ import json
 import os
 import platform
 import statistics
+import sys
 import time
 from pathlib import Path
 
@@ -83,6 +84,12 @@ def bench(spec_name: str, repeats: int, jacrev_max_rows: int, compiled: bool = F
         extra["compile_s"] = time.perf_counter() - t0
         extra["compiled"] = cj.compiled
         rows["jacfwd compiled (make_fx + Inductor)"] = _time(lambda: cj(theta)[0], repeats)
+        # The compile takes minutes: time the eager references again right beside the compiled row, so
+        # that a change of machine load during the compile does not bias the ratios.
+        t_res, _ = _time(lambda: p.residuals(theta).detach(), repeats)
+        rows["one residual evaluation"] = (t_res, None)
+        t_fwd, J = _time(lambda: p.jacobian(theta)[0], repeats)
+        rows["jacfwd (forward mode)"] = (t_fwd, J)
     if M <= jacrev_max_rows:
         rows["jacrev (reverse mode)"] = _time(lambda: torch.func.jacrev(p.residuals)(theta), max(1, repeats // 2))
     if fd:
@@ -109,11 +116,11 @@ def main() -> None:
     results = {
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "torch": torch.__version__,
                     "threads": torch.get_num_threads(), "loadavg_before": os.getloadavg()},
-        "problems": [bench(s, args.repeats, args.jacrev_max_rows, args.compiled, not args.no_fd)
-                     for s in args.specs.split(",")],
+        "problems": [],
     }
-    results["machine"]["loadavg_after"] = os.getloadavg()
-    for prob in results["problems"]:
+    for spec in args.specs.split(","):  # each table printed as soon as it is measured
+        prob = bench(spec, args.repeats, args.jacrev_max_rows, args.compiled, not args.no_fd)
+        results["problems"].append(prob)
         print(f"\n{prob['spec']}: N = {prob['variables']} variables, M = {prob['residuals']} residuals")
         if "compile_s" in prob:
             print(f"compiled Jacobian: capture + compile {prob['compile_s']:.0f} s (compiled: {prob['compiled']})")
@@ -123,12 +130,14 @@ def main() -> None:
             d = "—" if r["max_rel_diff"] is None else f"{r['max_rel_diff']:.1e}"
             print(f"| {r['method']} | {r['median_s']:.4f} | {r['ratio_to_jacfwd']:.2f} | "
                   f"{r['residual_evaluations']:.1f} | {d} |")
+        sys.stdout.flush()
+        results["machine"]["loadavg_after"] = os.getloadavg()
+        if args.json:  # after each problem: a long compile cut short keeps what was measured
+            from lensopt.io.files import write_text_atomic
+
+            write_text_atomic(args.json, json.dumps(results, indent=2) + "\n")
     print(f"\nload average before/after: {results['machine']['loadavg_before']} / "
           f"{results['machine']['loadavg_after']}, torch threads {results['machine']['threads']}")
-    if args.json:
-        from lensopt.io.files import write_text_atomic
-
-        write_text_atomic(args.json, json.dumps(results, indent=2) + "\n")
 
 
 if __name__ == "__main__":

@@ -1,8 +1,9 @@
 """``lensopt simulate`` as a user runs it: a 4000 × 3000 RGB PNG in, a PNG out, the whole process
-timed (wall) with its peak RSS, for this tree's CLI with and without ``--score`` and, in the same run,
-for another checkout's CLI (``--before``, e.g. /work/main: the code before scoring became optional).
+timed (wall) with its peak RSS, for this tree's CLI without ``--score`` (the default now) and with it
+(what every run did before scoring became optional), interleaved in the same run; optionally another
+checkout's CLI (``--before``).
 
-    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/simulate_command.py --before /work/main --repeats 1 \\
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/simulate_command.py --repeats 2 \\
         --json benchmarks/results_simulate_command.json
 
 Scene: coffee.png mirrored to 4000 × 3000 (as benchmarks/bench_simulate.py); lens specs/cooke_triplet.toml
@@ -32,7 +33,8 @@ def run(tree: Path, args: list[str]) -> tuple[float, float]:
     env = {**os.environ, "PYTHONPATH": str(tree), "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1")}
     code = "import sys; from lensopt.cli import app; sys.argv[0] = 'lensopt'; app()"
     t0 = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-c", code, "simulate", *args], env=env,
+    # cwd = the tree: ``python -c`` puts the working directory first on sys.path, before PYTHONPATH.
+    proc = subprocess.Popen([sys.executable, "-c", code, "simulate", *args], env=env, cwd=tree,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
@@ -57,7 +59,8 @@ def main() -> None:
     write_image(src, big, info)
     common = [str(ROOT / "specs" / "cooke_triplet.toml"), str(src), "-o", str(tmp / "out.png"), "--region", "full",
               "--grid", "5x4", "--effects", "-diffraction"]
-    variants = {"this tree, no scoring (default)": (ROOT, []), "this tree, --score": (ROOT, ["--score"])}
+    variants = {"no scoring (the default now)": (ROOT, []),
+                "--score (PSNR + SSIM against the input: what every run did before)": (ROOT, ["--score"])}
     if a.before is not None:
         variants = {f"{a.before} (scores by default)": (a.before, []), **variants}
     times: dict[str, list[tuple[float, float]]] = {k: [] for k in variants}

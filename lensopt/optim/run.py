@@ -117,9 +117,12 @@ def make_optimizer(problem: Problem, theta: torch.Tensor, method: str,
 
 
 def resolve_device(device: str | None) -> torch.device:
-    """``--device``: a torch device name (cpu, cuda, cuda:1, mps); an error when it is unusable here."""
+    """``--device``: a torch device name (cpu, cuda, cuda:1, mps) or ``auto`` (CUDA when there is one,
+    else the CPU); an error when it is unusable here."""
     if device is None:
         return torch.device("cpu")
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     try:
         dev = torch.device(device)
     except RuntimeError:

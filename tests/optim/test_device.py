@@ -79,6 +79,13 @@ def test_problem_on_the_cpu_device(make_cooke) -> None:  # noqa: ANN001
     _check_on(torch.device("cpu"), make_cooke)
 
 
+def test_auto_device_is_cuda_when_there_is_one() -> None:
+    from lensopt.optim.run import resolve_device
+
+    assert resolve_device("auto").type == ("cuda" if torch.cuda.is_available() else "cpu")
+    assert resolve_device(None).type == "cpu" and resolve_device("cpu").type == "cpu"
+
+
 @pytest.mark.skipif(not torch.cuda.is_available(),
                     reason="no CUDA device on this machine (torch CPU build or no GPU): the CUDA path was not run")
 def test_problem_on_cuda(make_cooke) -> None:  # noqa: ANN001
