@@ -212,10 +212,6 @@ class LensoptGroup(TyperGroup):
             code = err.exit_code
         if not standalone_mode:
             return code
-        # The command is over (its output complete): a signal arriving while the interpreter shuts down
-        # (Python restores the default handlers then) must not turn a finished run into a death by signal.
-        with contextlib.suppress(ValueError, AttributeError, OSError):
-            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
         sys.exit(code)
 
 
