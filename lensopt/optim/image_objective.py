@@ -14,6 +14,7 @@ MSE between the rendered capture (``imaging.render``) and the scene.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 from collections.abc import Sequence
@@ -124,8 +125,11 @@ class ImageObjective:
         return images, [self.tiles.region(int(i)) for i in idx]
 
     def set_batch(self, step: int) -> None:
-        """Use the batch of ``step`` from now on (the GTRA target is cleared)."""
+        """Use the batch of ``step`` from now on (the GTRA target is cleared). The batch's noise is drawn
+        from (seed, step), so no patch slot sees the same noise field at every step; the held-out set keeps
+        the fixed noise of ``seed``."""
         self.images, self.regions = self.batch(step)
+        self.noise_seed = _seed("noise", self.spec.seed, step) % 2**31
         self.target = None
 
     # ---------------------------------------------------------------------------------- rendering
@@ -145,11 +149,12 @@ class ImageObjective:
 
     def render(self, xy: Tensor, spots: Spots, airy: Tensor | None, images: Tensor, regions: Sequence[Region],
                *, noise: bool = True) -> Tensor:
-        """Captures of ``images`` at ``regions`` for spot diagrams ``xy`` (F, W, P, 2) (validity of ``spots``)."""
+        """Captures of ``images`` at ``regions`` for spot diagrams ``xy`` (F, W, P, 2) (validity of ``spots``);
+        the current batch gets the noise of its step, other images (held out) the spec's fixed noise."""
         psf, center = psfs_from_spots(xy, spots.valid, spots.wavelength_weights, half=spots.half,
                                       pitch_mm=self.sensor.pitch_mm, settings=self.settings, airy=airy)
-        return render_batch(psf, center, images, regions, self.sensor, self.channel_weights, self.settings,
-                            noise=noise)
+        settings = dataclasses.replace(self.settings, seed=self.noise_seed) if images is self.images else self.settings
+        return render_batch(psf, center, images, regions, self.sensor, self.channel_weights, settings, noise=noise)
 
     def loss(self, lens: Lens, images: Tensor | None = None, regions: Sequence[Region] | None = None) -> Tensor:
         """L(θ): MSE of the rendered captures of the batch (reverse mode through trace and rendering)."""

@@ -80,3 +80,30 @@ def test_raw_objective_without_a_sensor_is_a_one_line_error() -> None:
     with pytest.raises(LensoptError) as err:
         Problem(spec)
     assert err.value.path == "sensor"
+
+
+def test_batch_noise_changes_with_the_step_and_held_out_noise_stays_fixed() -> None:
+    # The capture minus its noise-free rendering is the noise field: drawn anew for every step's batch (a
+    # slot must not see the same field every step), identical for repeated evaluations within a step (LM's
+    # trial steps compare like with like), and fixed for the held-out set.
+    obj = _problem().image
+    lens, _ = _problem().lens(_problem().theta0)
+    spots = obj.spots(lens)
+
+    def noise_of(images, regions):  # noqa: ANN001, ANN202
+        noisy = obj.render(spots.xy, spots, None, images, regions)
+        return noisy - obj.render(spots.xy, spots, None, images, regions, noise=False)
+
+    obj.set_batch(0)
+    n0 = noise_of(obj.images, obj.regions)
+    assert float(n0.abs().max()) > 0
+    torch.testing.assert_close(noise_of(obj.images, obj.regions), n0, rtol=0, atol=0)
+    images0, regions0 = obj.images, obj.regions
+    obj.set_batch(1)
+    obj.images, obj.regions = images0, regions0  # same scenes and tiles, another step's noise
+    n1 = noise_of(obj.images, obj.regions)
+    assert float((n1 - n0).abs().max()) > 0.1 * float(n0.abs().max())
+    held = obj.batch(-1, held_out=True, size=2)
+    h0 = noise_of(held[0].clone(), held[1])
+    obj.set_batch(5)
+    torch.testing.assert_close(noise_of(held[0].clone(), held[1]), h0, rtol=0, atol=0)
