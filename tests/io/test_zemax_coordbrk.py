@@ -40,6 +40,41 @@ def _file() -> str:
     return text.replace("SURF 10\n", CB2 + "SURF 10\n")
 
 
+def _optiland_optic(path: Path, media: list[float]):  # noqa: ANN202
+    """optiland's reading of the file at ``path``, its media replaced by lensopt's indices (one per gap), so
+    that the geometry is compared and not two glass databases."""
+    be.set_precision("float64")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        optic = ZemaxToOpticConverter(ZemaxDataParser(str(path)).parse()).convert()
+    surfaces = optic.surfaces.surfaces
+    assert len(surfaces) == len(media) + 1
+    for surf, n in zip(surfaces[:-1], media, strict=True):
+        surf.material_post = IdealMaterial(n)
+    return optic
+
+
+def _intercepts(optic, model, pts: torch.Tensor) -> tuple[float, np.ndarray, np.ndarray]:  # noqa: ANN001
+    """lensopt's launched rays at the reference wavelength traced by optiland from z = −5 mm: the largest
+    |Δx|, |Δy| of the image intercepts (in the image surface's own frame) over the rays lensopt passes,
+    lensopt's intercepts and their validity."""
+    w = model.system.reference
+    bundle = trace_bundle(model.lens, model.system, pts)
+    pos, d = bundle.rays.pos[:, w], bundle.rays.dir[:, w]
+    pos = pos + ((-5.0 - pos[..., 2]) / d[..., 2]).unsqueeze(-1) * d
+    P, D = pos.reshape(-1, 3).numpy(), d.reshape(-1, 3).numpy()
+    rays = RealRays(P[:, 0], P[:, 1], P[:, 2], D[:, 0], D[:, 1], D[:, 2], np.ones(len(P)),
+                    np.full(len(P), model.lens.wavelength_um[w].item()))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        optic.surfaces.trace(rays, skip=1)
+        optic.surfaces.surfaces[-1].geometry.cs.localize(rays)
+    ours = bundle.result.pos[:, w].reshape(-1, 3).numpy()
+    ok = bundle.result.valid[:, w].reshape(-1).numpy()
+    dev = max(np.abs(np.asarray(rays.x) - ours[:, 0])[ok].max(), np.abs(np.asarray(rays.y) - ours[:, 1])[ok].max())
+    return dev, ours, ok
+
+
 def test_coordinate_breaks_trace_like_optiland(tmp_path: Path) -> None:
     text = _file()
     result = import_zemax(text)
@@ -54,32 +89,11 @@ def test_coordinate_breaks_trace_like_optiland(tmp_path: Path) -> None:
 
     path = tmp_path / "cb.zmx"
     path.write_text(text)
-    be.set_precision("float64")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        optic = ZemaxToOpticConverter(ZemaxDataParser(str(path)).parse()).convert()
-    surfaces = optic.surfaces.surfaces
-    media = [n for i, n in enumerate(index) if i == 0 or (i - 1) not in dummies]
-    assert len(surfaces) == len(media) + 1
-    for surf, n in zip(surfaces[:-1], media, strict=True):
-        surf.material_post = IdealMaterial(n)
-
+    optic = _optiland_optic(path, [n for i, n in enumerate(index) if i == 0 or (i - 1) not in dummies])
     pts = PupilSampling.parse("rings:6:nojitter").points(dtype=torch.float64)
     pts = torch.cat([pts, pts * torch.tensor([-1.0, 1.0], dtype=torch.float64)])
-    bundle = trace_bundle(model.lens, model.system, pts)
-    pos, d = bundle.rays.pos[:, w], bundle.rays.dir[:, w]
-    pos = pos + ((-5.0 - pos[..., 2]) / d[..., 2]).unsqueeze(-1) * d
-    P, D = pos.reshape(-1, 3).numpy(), d.reshape(-1, 3).numpy()
-    wl = spec.spectrum.wavelengths_nm[w] * 1e-3
-    rays = RealRays(P[:, 0], P[:, 1], P[:, 2], D[:, 0], D[:, 1], D[:, 2], np.ones(len(P)), np.full(len(P), wl))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        optic.surfaces.trace(rays, skip=1)
-        surfaces[-1].geometry.cs.localize(rays)  # image intercepts in the image surface's own frame
-    ours = bundle.result.pos[:, w].reshape(-1, 3).numpy()
-    ok = bundle.result.valid[:, w].reshape(-1).numpy()
+    dev, ours, ok = _intercepts(optic, model, pts)
     assert ok.all()
-    dev = max(np.abs(np.asarray(rays.x) - ours[:, 0]).max(), np.abs(np.asarray(rays.y) - ours[:, 1]).max())
     assert dev <= 1e-9, f"image intercepts differ by {dev:.3e} mm"
     # The breaks matter: the centred lens lands elsewhere by far more than the tolerance.
     plain = build(import_zemax(LENS1).spec)
@@ -153,27 +167,8 @@ def test_decenter_and_return_round_trip(move: dict, tmp_path: Path) -> None:
     # Independent check: optiland's reading of the same file (its nested coordinate systems).
     path = tmp_path / "return.zmx"
     path.write_text(text)
-    be.set_precision("float64")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        optic = ZemaxToOpticConverter(ZemaxDataParser(str(path)).parse()).convert()
-    w = a.system.reference
-    for surf, n in zip(optic.surfaces.surfaces[:-1], a.lens.index[:, w].tolist(), strict=True):
-        surf.material_post = IdealMaterial(n)
-    pts2 = torch.cat([pts, pts * torch.tensor([-1.0, 1.0], dtype=torch.float64)])
-    bundle = trace_bundle(a.lens, a.system, pts2)
-    pos, d = bundle.rays.pos[:, w], bundle.rays.dir[:, w]
-    pos = pos + ((-5.0 - pos[..., 2]) / d[..., 2]).unsqueeze(-1) * d
-    P, D = pos.reshape(-1, 3).numpy(), d.reshape(-1, 3).numpy()
-    rays = RealRays(P[:, 0], P[:, 1], P[:, 2], D[:, 0], D[:, 1], D[:, 2], np.ones(len(P)),
-                    np.full(len(P), a.lens.wavelength_um[w].item()))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        optic.surfaces.trace(rays, skip=1)
-        optic.surfaces.surfaces[-1].geometry.cs.localize(rays)
-    ours = bundle.result.pos[:, w].reshape(-1, 3).numpy()
-    ok = bundle.result.valid[:, w].reshape(-1).numpy()
-    dev = max(np.abs(np.asarray(rays.x) - ours[:, 0])[ok].max(), np.abs(np.asarray(rays.y) - ours[:, 1])[ok].max())
+    optic = _optiland_optic(path, a.lens.index[:, a.system.reference].tolist())
+    dev, _, _ = _intercepts(optic, a, torch.cat([pts, pts * torch.tensor([-1.0, 1.0], dtype=torch.float64)]))
     assert dev <= 1e-9, f"image intercepts differ by {dev:.3e} mm"
 
 
@@ -207,29 +202,8 @@ def test_moved_element_round_trip(move: dict, tmp_path: Path) -> None:
         return  # optiland ignores the order flag: exact only for one kind of motion
     path = tmp_path / "element.zmx"
     path.write_text(text)
-    be.set_precision("float64")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        optic = ZemaxToOpticConverter(ZemaxDataParser(str(path)).parse()).convert()
-    w = a.system.reference
-    index = a.lens.index[:, w].tolist()
+    index = a.lens.index[:, a.system.reference].tolist()
     media = index[:4] + [index[4]] + index[4:]  # the −L dummy after surface 3 sits in surface 3's medium
-    surfaces = optic.surfaces.surfaces
-    assert len(surfaces) == len(media) + 1
-    for surf, n in zip(surfaces[:-1], media, strict=True):
-        surf.material_post = IdealMaterial(n)
-    pts2 = torch.cat([pts, pts * torch.tensor([-1.0, 1.0], dtype=torch.float64)])
-    bundle = trace_bundle(a.lens, a.system, pts2)
-    pos, d = bundle.rays.pos[:, w], bundle.rays.dir[:, w]
-    pos = pos + ((-5.0 - pos[..., 2]) / d[..., 2]).unsqueeze(-1) * d
-    P, D = pos.reshape(-1, 3).numpy(), d.reshape(-1, 3).numpy()
-    rays = RealRays(P[:, 0], P[:, 1], P[:, 2], D[:, 0], D[:, 1], D[:, 2], np.ones(len(P)),
-                    np.full(len(P), a.lens.wavelength_um[w].item()))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        optic.surfaces.trace(rays, skip=1)
-        surfaces[-1].geometry.cs.localize(rays)
-    ours = bundle.result.pos[:, w].reshape(-1, 3).numpy()
-    ok = bundle.result.valid[:, w].reshape(-1).numpy()
-    dev = max(np.abs(np.asarray(rays.x) - ours[:, 0])[ok].max(), np.abs(np.asarray(rays.y) - ours[:, 1])[ok].max())
+    optic = _optiland_optic(path, media)
+    dev, _, _ = _intercepts(optic, a, torch.cat([pts, pts * torch.tensor([-1.0, 1.0], dtype=torch.float64)]))
     assert dev <= 1e-9, f"image intercepts differ by {dev:.3e} mm"
