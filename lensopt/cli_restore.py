@@ -122,8 +122,8 @@ def register(app: typer.Typer) -> None:
 
         from lensopt.optim.irm import imaging_setup
         from lensopt.optim.irm_run import train_irm
-        from lensopt.restore.config import configs_from_spec
         from lensopt.spec import dump_json
+        from lensopt.spec.restore import configs_from_spec
 
         dev = resolve_device(device)
         model = load_model(lens)

@@ -30,8 +30,9 @@ from lensopt.optim.joint import Dist, RestoredObjective, evaluate_pair, joint_st
 from lensopt.optim.lm import LevenbergMarquardt, Trial
 from lensopt.optim.problem import Problem
 from lensopt.optim.writeback import to_spec
-from lensopt.restore.config import RestoreConfig, TrainConfig, configs_from_spec
+from lensopt.restore.config import RestoreConfig, TrainConfig
 from lensopt.restore.model import ConditionedRestorer
+from lensopt.spec.restore import configs_from_spec
 
 __all__ = ["JointResult", "prepare_spec", "run_joint"]
 

@@ -8,7 +8,7 @@ import json
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["RestoreConfig", "TrainConfig", "configs_from_spec"]
+__all__ = ["RestoreConfig", "TrainConfig"]
 
 
 @dataclass(frozen=True)
@@ -80,18 +80,3 @@ class TrainConfig:
     validation_patches: int = 16
     seed: int = 0
     extra: dict[str, Any] = field(default_factory=dict)
-
-
-def configs_from_spec(section: Any | None) -> tuple[RestoreConfig, TrainConfig]:
-    """Plain configs from a ``[restore]`` spec section (``lensopt.spec.restore.RestoreSpec`` or None:
-    the defaults). Reads attributes only, so the core does not depend on pydantic."""
-    if section is None:
-        return RestoreConfig(), TrainConfig()
-    net = RestoreConfig(width=section.width, encoder_blocks=tuple(section.encoder_blocks),
-                        middle_blocks=section.middle_blocks, decoder_blocks=tuple(section.decoder_blocks),
-                        snr=section.snr)
-    t = section.train
-    train = TrainConfig(steps=t.steps, batch=t.batch, patch=t.patch, lr=t.lr, betas=tuple(t.betas), lr_min=t.lr_min,
-                        noise_sigma=t.noise_sigma, checkpoint_every=t.checkpoint_every,
-                        validate_every=t.validate_every, validation_patches=t.validation_patches)
-    return net, train

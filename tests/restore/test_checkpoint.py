@@ -177,8 +177,8 @@ def _identity_checkpoint(lens: Path, out: Path) -> None:
     from lensopt.io.checkpoint import Checkpoint, save_checkpoint
     from lensopt.optim.irm_run import network_fingerprint
     from lensopt.restore import ConditionedRestorer
-    from lensopt.restore.config import configs_from_spec
     from lensopt.spec import dump_json, load_spec
+    from lensopt.spec.restore import configs_from_spec
 
     spec = load_spec(lens)
     net_cfg, _ = configs_from_spec(spec.restore)
