@@ -17,6 +17,7 @@ import torch
 from torch import Tensor
 
 from lensopt.optics.lens import Lens, System
+from lensopt.parallel import run_tasks
 from lensopt.tolerance.evaluate import EvalSetup, evaluate
 from lensopt.tolerance.model import Tolerance, TrialParams, draw, perturb
 
@@ -106,30 +107,8 @@ def run_trials(job: Job, values: Tensor, *, scheduler: str | None = None, worker
             ``workers`` single-threaded worker processes) or a scheduler address (``tcp://…``).
     """
     chunks = [values[i:i + job.chunk] for i in range(0, values.shape[0], job.chunk)]
-    if scheduler is None:
-        parts = [_chunk_eval(job, c) for c in chunks]
-    else:
-        parts = _run_dask(job, chunks, scheduler, workers)
+    parts = run_tasks(_chunk_eval, chunks, shared=job, scheduler=scheduler, workers=workers)
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-
-
-def _run_dask(job: Job, chunks: list[Tensor], scheduler: str, workers: int) -> list[dict[str, np.ndarray]]:
-    from distributed import Client, LocalCluster
-
-    cluster = None
-    if scheduler == "local":
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
-        client = Client(cluster)
-    else:
-        client = Client(scheduler)
-    try:
-        job_f = client.scatter(job, broadcast=True)
-        futures = [client.submit(_chunk_eval, job_f, c, pure=False) for c in chunks]
-        return client.gather(futures)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
 
 
 # --------------------------------------------------------------------------------- sensitivity
