@@ -522,6 +522,7 @@ from lensopt import (  # noqa: E402
     cli_evaluate,
     cli_optimize,
     cli_restore,
+    cli_sweep,
     cli_tolerance,
     cli_zemax,
 )
@@ -533,6 +534,7 @@ cli_tolerance.register(app, plot_app)
 cli_zemax.register(app)
 cli_restore.register(app)
 cli_optimize.register(app)
+cli_sweep.register(app)
 
 if __name__ == "__main__":  # pragma: no cover
     app()

@@ -10,6 +10,7 @@ disk or show progress).
 from __future__ import annotations
 
 import contextlib
+import logging
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, TypeVar
 
@@ -26,6 +27,11 @@ def dask_client(scheduler: str, workers: int) -> Iterator[Any]:
     processes (closed on exit); anything else is the address of a running scheduler (``tcp://…``)."""
     from distributed import Client, LocalCluster
 
+    # Dask logs every connection at INFO; keep that to --verbose runs (root logger at INFO or below).
+    log = logging.getLogger("distributed")
+    old_level = log.level
+    if logging.getLogger().getEffectiveLevel() > logging.INFO:
+        log.setLevel(max(old_level, logging.WARNING))
     cluster = None
     if scheduler == "local":
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
@@ -38,6 +44,7 @@ def dask_client(scheduler: str, workers: int) -> Iterator[Any]:
         client.close()
         if cluster is not None:
             cluster.close()
+        log.setLevel(old_level)
 
 
 def run_tasks(fn: Callable[[S, T], R], items: Sequence[T], *, shared: S, scheduler: str | None = None,
