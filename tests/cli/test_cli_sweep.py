@@ -4,6 +4,11 @@ another sweep are one line and exit 2, before any work."""
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 from typer.testing import CliRunner
@@ -60,3 +65,34 @@ def test_bad_key_is_one_line_exit_2(tmp_path: Path) -> None:
     r = runner.invoke(app, ["sweep", str(spec), "--vary", "optimize.steps=3", "-o", str(tmp_path / "o"),
                             "--scheduler", "nowhere"])
     assert r.exit_code == 2 and r.stderr.startswith("error: --scheduler:")
+
+
+def test_sigterm_keeps_finished_starts_and_the_run_resumes(tmp_path: Path) -> None:
+    spec, out = _tiny(tmp_path), tmp_path / "out"
+    args = ["sweep", str(spec), "--vary", "optimize.solves[0].value=47,49", "--starts", "2", "--steps", "12",
+            "--scheduler", "serial", "--esr-sampling", "rings:3", "-o", str(out), "--json"]
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-m", "lensopt", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)
+    seen = ""
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and "sweep 1/4 tasks" not in seen:  # the plain progress line (no TTY)
+        line = proc.stderr.readline()
+        seen += line
+        if not line and proc.poll() is not None:
+            break
+    assert "sweep 1/4 tasks" in seen, seen
+    proc.send_signal(signal.SIGTERM)
+    stdout, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    assert "Traceback" not in err and "terminated:" in err
+    doc = json.loads(stdout)
+    assert doc["interrupted"] and not doc["complete"]
+    done = doc["computed"]
+    assert 1 <= done < 4 and len(list((out / "points").glob("*_*.json"))) == 2 * done  # record + lens each
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []  # no temp files left
+    assert json.loads((out / "sweep.json").read_text())["complete"] is False
+    r = runner.invoke(app, [*args, "--quiet"])
+    assert r.exit_code == 0, r.output
+    again = json.loads(r.stdout)
+    assert again["complete"] and again["skipped"] == done and again["computed"] == 4 - done
