@@ -140,11 +140,14 @@ def expand_grid(spec: LensSpec, varies: Sequence[Vary]) -> list[Point]:
         s = spec
         for key, value in zip(keys, combo, strict=True):
             s = set_key(s, key, value)
+        shown = ", ".join(f"{k}={format_value(v)}" for k, v in zip(keys, combo, strict=True))
         try:
             build(s)
         except LensoptError as err:
-            shown = ", ".join(f"{k}={format_value(v)}" for k, v in zip(keys, combo, strict=True))
             raise LensoptError(f"{shown} makes an unusable lens: {err}", path="--vary") from None
+        if s.optimize is not None and s.optimize.objective == "restored":
+            raise LensoptError(f"at {shown}: sweeps run the spot and raw objectives; objective = \"restored\" "
+                               "trains a network per run (lensopt optimize --checkpoint)", path="optimize.objective")
         points.append(Point(i, dict(zip(keys, combo, strict=True)), dump_json(s)))
     return points
 

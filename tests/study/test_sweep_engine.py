@@ -191,3 +191,9 @@ def test_bad_value_fails_before_any_work(tmp_path: Path) -> None:
         run_sweep(spec, text, [parse_vary("surfaces[0].material=SK16,NOPE")], SETTINGS, tmp_path / "x")
     assert not (tmp_path / "x").exists()
     assert set_key(spec, "optimize.solves[0].value", 48.0).optimize.solves[0].value == 48.0
+
+
+def test_restored_objective_is_refused(tmp_path: Path) -> None:
+    spec = load_spec(COOKE.parent / "cmount_4p_restored.toml")
+    with pytest.raises(LensoptError, match="^optimize.objective: at optimize.steps=1: sweeps run the spot"):
+        sw.expand_grid(spec, [parse_vary("optimize.steps=1")])
