@@ -157,7 +157,11 @@ def expand_grid(spec: LensSpec, varies: Sequence[Vary]) -> list[Point]:
 
 def perturbed_spec(spec: LensSpec, point: int, start: int, settings: Settings) -> LensSpec:
     """Start ``start`` of grid point ``point``: the spec itself for start 0, else θ0 perturbed (module
-    doc) and written back. Deterministic in (settings.seed, point, start)."""
+    doc) and written back. Deterministic in (settings.seed, point, start).
+
+    Raises:
+        LensoptError: the perturbed lens is unusable (the start is then recorded as failed).
+    """
     if start == 0:
         return spec
     import torch
@@ -170,7 +174,14 @@ def perturbed_spec(spec: LensSpec, point: int, start: int, settings: Settings) -
     rng = np.random.default_rng([settings.seed, point, start])
     z = torch.from_numpy(rng.standard_normal(theta0.shape[0])).to(theta0)
     scale = torch.clamp(theta0.abs(), min=settings.floor)
-    return to_spec(problem, theta0 + settings.sigma * scale * z)
+    theta = theta0 + settings.sigma * scale * z
+    reason = problem.check(theta)  # e.g. a glass thickness ≤ 0, which no spec can hold
+    if reason:
+        raise LensoptError(f"the perturbed start is unusable: {reason}")
+    try:
+        return to_spec(problem, theta)
+    except ValueError as err:  # the spec's validation of a written-back value
+        raise LensoptError(f"the perturbed start is not a valid spec: {' '.join(str(err).split())}") from None
 
 
 def run_task(settings: Settings, task: Task) -> tuple[dict[str, Any], str | None]:

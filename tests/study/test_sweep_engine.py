@@ -177,7 +177,7 @@ def test_unusable_start_is_recorded_as_failed(tmp_path: Path) -> None:
     res = run_sweep(load_spec(spec_path), text, [parse_vary("optimize.solves[0].value=50.0")], st, tmp_path / "o",
                     plot=False)
     rec = res.records[(0, 1)]
-    assert rec["status"] == "failed" and "cannot be optimized" in rec["reason"]
+    assert rec["status"] == "failed" and rec["reason"].startswith("the perturbed start is unusable: image distance")
     row = res.rows[0]
     assert row["starts_failed"] == 1 and row["starts_finished"] == 1 and row["best_start"] == 0
     assert not (tmp_path / "o" / "points" / "0_1.lens.json").exists()
@@ -197,3 +197,18 @@ def test_restored_objective_is_refused(tmp_path: Path) -> None:
     spec = load_spec(COOKE.parent / "cmount_4p_restored.toml")
     with pytest.raises(LensoptError, match="^optimize.objective: at optimize.steps=1: sweeps run the spot"):
         sw.expand_grid(spec, [parse_vary("optimize.steps=1")])
+
+
+def test_perturbation_to_a_negative_glass_thickness_is_a_lensopt_error() -> None:
+    # C-mount varies glass thicknesses; σ = 3 drives some of them below zero, which the spec cannot
+    # hold: the start must fail as a LensoptError (recorded), never as a validation crash.
+    spec = load_spec(COOKE.parent / "cmount_4p.toml")
+    st = Settings(starts=6, sigma=3.0)
+    outcomes = []
+    for k in range(1, 6):
+        try:
+            perturbed_spec(spec, 0, k, st)
+            outcomes.append("ok")
+        except LensoptError as err:
+            outcomes.append(str(err))
+    assert any("glass element thickness" in o for o in outcomes), outcomes
