@@ -198,14 +198,15 @@ def run_task(settings: Settings, task: Task) -> tuple[dict[str, Any], str | None
         try:
             start_spec = perturbed_spec(spec, task.point, task.start, settings)
             result = optimize(start_spec, steps=settings.steps, seed=settings.seed)
-        except LensoptError as err:
+            if result.interrupted:  # Ctrl-C in a serial run: the start is not finished
+                raise KeyboardInterrupt
+            merit, physical, reason, esr_opt = _final_merit(result.spec, settings)
+            esr = _report_esr(result.spec, settings) if physical else None
+        except LensoptError as err:  # the start cannot run, or its result cannot be evaluated
             record.update(status="failed", reason=str(err), wall_s=time.perf_counter() - t0)
             return record, None
-        if result.interrupted:  # Ctrl-C in a serial run: the start is not finished
-            raise KeyboardInterrupt
-        merit, physical, reason, esr_opt = _final_merit(result.spec, settings)
         record.update(status="finished" if physical else "failed", reason=reason, merit=merit,
-                      esr_um=_report_esr(result.spec, settings), esr_opt_um=esr_opt, steps=result.steps,
+                      esr_um=esr, esr_opt_um=esr_opt, steps=result.steps,
                       stop_reason=result.stop_reason, start_merit=result.start_merit,
                       start_esr_opt_um=result.start_esr_um, warning=result.warning,
                       bound=[b.name for b in result.bound], wall_s=time.perf_counter() - t0)
