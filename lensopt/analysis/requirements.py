@@ -57,7 +57,7 @@ class Requirements:
         max_distortion_percent: |D| at every field.
         min_illumination: relative illumination (S52) at every field.
         catalog: a design catalog name (``ohara-recommended``, ``plastics`` …) or a set of glass names
-            every glass element must be one of (compared without a ``vendor:`` prefix).
+            every glass element must be one of (compared without a ``vendor:`` prefix, spaces and case).
         efl, image_height, total_track: first-order targets, held within ``first_order_rtol``.
     """
 
@@ -202,10 +202,13 @@ def check_requirements(
                 out.append(Check(name, v, f"{target:g} ± {100 * req.first_order_rtol:g} %",
                                  abs(v - target) <= req.first_order_rtol * abs(target)))
     if req.catalog is not None:
-        allowed = (frozenset(design_catalog(req.catalog).names) if isinstance(req.catalog, str)
-                   else req.catalog)
+        def key(name: str) -> str:  # "ohara:S-BAL3" and the catalog's "S-BAL 3" are the same glass
+            return name.split(":")[-1].replace(" ", "").upper()
+
+        allowed = {key(n) for n in (design_catalog(req.catalog).names if isinstance(req.catalog, str)
+                                    else req.catalog)}
         names = [m for m in materials if m is not None]
-        bad = [m for m in materials if m is None or m.split(":")[-1] not in allowed]
+        bad = [m for m in materials if m is None or key(m) not in allowed]
         out.append(Check("catalog glasses", ", ".join(str(m) for m in names), "named catalog entries", not bad,
                          {"not_in_catalog": bad}))
     return out
