@@ -188,7 +188,7 @@ class Problem:
         rp = self.opt.constraints.ray_path
         S = len(self.spec.surfaces)
         out = []
-        for i, sp in enumerate(rp.spans if rp is not None else []):
+        for i, sp in enumerate((rp.spans if rp is not None else None) or []):
             path = f"optimize.constraints.ray_path.spans[{i}]"
             if not -S <= sp.first < S:
                 raise SpecError(f"no such surface (the lens has {S})", path=f"{path}.first", got=sp.first)

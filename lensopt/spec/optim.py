@@ -147,7 +147,7 @@ class RayPathSpec(_Weighted):
     image_min: float | None = 0.0
     image_max: float | None = None
     gaps: list[GapBoundSpec] = Field(default_factory=list)
-    spans: list[SpanBoundSpec] = Field(default_factory=list)
+    spans: list[SpanBoundSpec] | None = None  # None (not []): absent from written lenses
 
 
 class RayAngleSpec(_Weighted):
