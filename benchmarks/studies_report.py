@@ -4,18 +4,20 @@ lens a short ``lensopt optimize`` run wrote from it, the ESR on a dense pupil (r
 (``lensopt.analysis.requirements``), the glasses, and for a diffractive surface its phase range over the
 used aperture. Writes benchmarks/results_studies.json.
 
-    PYTHONPATH=. python benchmarks/studies_report.py out/telephoto_5p_tr080.json \
-        out/telephoto_5p1_middle_tr075.json out/microscope_8p_wd12.json
+    PYTHONPATH=. python benchmarks/studies_report.py lenses/telephoto_5p_tr080.json \
+        lenses/telephoto_5p1_middle_tr075.json lenses/microscope_8p_wd12.json
 
-Each lens is matched to its spec by file name (specs/<stem>.toml). The seed's published ESRs (read off
-its figures): 5P at TR 0.80 ≈ 1.75 µm (Figure S13), 5P+1 (middle) at TR 0.75 ≈ 2.6 µm (Figure S16),
-8P microscope at WD 12 mm ≈ 0.85 µm (Figure S32).
+Each lens is matched to its spec by file name (specs/<stem>.toml, a suffix _s<steps> dropped).
+The seed's published ESRs (as issue 15 reads them off its figures): 5P at TR 0.80 ≈ 1.75 µm
+(Figure S13), 5P+1 (middle) at TR 0.75 ≈ 2.6 µm (Figure S16), 8P microscope at WD 12 mm ≈ 0.85 µm
+(Figure S32).
 """
 
 from __future__ import annotations
 
 import json
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -85,13 +87,14 @@ def lens_checks(stem: str, spec) -> dict:  # noqa: ANN001
 def main(paths: list[str]) -> None:
     results = {}
     for p in paths:
-        stem = Path(p).stem
+        key = Path(p).stem
+        stem = re.sub(r"_s\d+$", "", key)  # out/telephoto_5p_tr080_s320.json: the spec's lens after 320 steps
         spec_path = ROOT / "specs" / f"{stem}.toml"
         start = lens_checks(stem, _solved_start(spec_path))
         end = lens_checks(stem, load_spec(p))
-        results[stem] = {"spec": str(spec_path.relative_to(ROOT)), "lens": p,
+        results[key] = {"spec": str(spec_path.relative_to(ROOT)), "lens": p,
                          "published_esr_um": PUBLISHED_UM.get(stem), "start": start, "end": end}
-        print(f"{stem}: ESR {start['esr_um_rings24']:.3f} → {end['esr_um_rings24']:.3f} µm "
+        print(f"{key}: ESR {start['esr_um_rings24']:.3f} → {end['esr_um_rings24']:.3f} µm "
               f"(published ≈ {PUBLISHED_UM.get(stem)}); failed: {end['requirements_failed']}")
     out = ROOT / "benchmarks" / "results_studies.json"
     old = json.loads(out.read_text()) if out.exists() else {}
