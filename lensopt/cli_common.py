@@ -31,27 +31,15 @@ try:  # typer ≥ 0.20 vendors click
 except ImportError:  # pragma: no cover
     from click import exceptions as click_exc  # type: ignore[no-redef]
 
+from lensopt.cli_process import EX_SIGINT, EX_SIGTERM, Interrupted, Terminated, state
 from lensopt.errors import LensoptError
 
 __all__ = ["AimOpt", "AimStepsOpt", "check_seed", "EX_INTERNAL", "JsonOpt", "LensArg", "SamplingOpt", "SeedOpt",
-           "Terminated", "check_output", "console", "err_console", "handle_errors", "LensoptGroup",
+           "Interrupted", "Terminated", "check_output", "console", "err_console", "handle_errors", "LensoptGroup",
            "report_signal", "signals_deferred", "state", "print_json", "LowerLevelFormatter"]
 
-EX_USAGE, EX_INTERNAL, EX_SIGINT, EX_SIGTERM = 2, 70, 130, 143
+EX_USAGE, EX_INTERNAL = 2, 70
 F = TypeVar("F", bound=Callable[..., Any])
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised like Ctrl-C so that every ``except KeyboardInterrupt`` keeps the best state."""
-
-
-class _State:
-    verbose = False
-    signal_exit = EX_SIGINT  # the exit code of the last signal received
-    signal_reported = False  # its one line is printed
-
-
-state = _State()
 
 
 # Wide enough for tables when the stream is a pipe or a file (rich would assume 80 columns).
@@ -96,20 +84,22 @@ def handle_errors(fn: F) -> F:
             return fn(*args, **kwargs)
         except (typer.Exit, typer.Abort, click_exc.ClickException):
             raise
-        except LensoptError as err:
-            error_line(str(err))
-            raise typer.Exit(EX_USAGE) from None
         except KeyboardInterrupt:
             raise typer.Exit(report_signal()) from None
-        except RecursionError:
-            error_line("input nested too deeply")
-            raise typer.Exit(EX_USAGE) from None
-        except MemoryError:
-            error_line("out of memory; lower the sampling, image size or grid (see --max-memory)")
-            raise typer.Exit(EX_USAGE) from None
         except BrokenPipeError:
             raise typer.Exit(0) from None
         except Exception as err:
+            if state.signal_received:  # what the signal cut short failed after it (e.g. an import cut in half)
+                raise typer.Exit(report_signal()) from None
+            if isinstance(err, LensoptError):
+                error_line(str(err))
+                raise typer.Exit(EX_USAGE) from None
+            if isinstance(err, RecursionError):
+                error_line("input nested too deeply")
+                raise typer.Exit(EX_USAGE) from None
+            if isinstance(err, MemoryError):
+                error_line("out of memory; lower the sampling, image size or grid (see --max-memory)")
+                raise typer.Exit(EX_USAGE) from None
             if state.verbose:
                 raise
             error_line(f"internal error ({type(err).__name__}: {err}); please report it, with the command and "
@@ -132,18 +122,18 @@ def report_signal(line: str | None = None) -> int:
 
 
 def _on_sigterm(signum: int, frame: Any) -> None:
-    state.signal_exit = EX_SIGTERM
+    state.signal_exit, state.signal_received = EX_SIGTERM, True
     raise Terminated()
 
 
 def _on_sigint(signum: int, frame: Any) -> None:
-    state.signal_exit = EX_SIGINT
-    raise KeyboardInterrupt()
+    state.signal_exit, state.signal_received = EX_SIGINT, True
+    raise Interrupted()  # not KeyboardInterrupt itself: see lensopt/cli_process.py
 
 
 @contextlib.contextmanager
 def _signal_handlers() -> Iterator[None]:
-    """SIGINT → KeyboardInterrupt, SIGTERM → Terminated (a KeyboardInterrupt) while a command runs."""
+    """SIGINT → Interrupted, SIGTERM → Terminated (both KeyboardInterrupts) while a command runs."""
     try:
         old = {s: signal.signal(s, h) for s, h in ((signal.SIGINT, _on_sigint), (signal.SIGTERM, _on_sigterm))}
     except ValueError:  # not the main thread (an embedding application): leave signals alone
@@ -158,17 +148,30 @@ def _signal_handlers() -> Iterator[None]:
 
 @contextlib.contextmanager
 def signals_deferred() -> Iterator[None]:
-    """Block SIGINT and SIGTERM (delivered on exit from the block), e.g. while writing the result."""
-    sigs = {signal.SIGINT, signal.SIGTERM}
+    """Hold SIGINT and SIGTERM until the block ends (then the first one is acted on), e.g. while writing the
+    result. The Python handlers are swapped, not the thread's signal mask: a process-directed signal may
+    land on any thread (torch's workers), and a mask would be inherited by subprocesses."""
+    held: list[int] = []
+
+    def hold(signum: int, frame: Any) -> None:
+        held.append(signum)
+
     try:
-        signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
-    except (ValueError, AttributeError, OSError):  # pragma: no cover
+        old = {s: signal.signal(s, hold) for s in (signal.SIGINT, signal.SIGTERM)}
+    except ValueError:  # not the main thread: leave signals alone
         yield
         return
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, sigs)
+        for s, h in old.items():
+            signal.signal(s, h)
+        if held:
+            handler = old[held[0]]
+            if callable(handler):
+                handler(held[0], None)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(held[0])
 
 
 class LensoptGroup(TyperGroup):
@@ -188,7 +191,7 @@ class LensoptGroup(TyperGroup):
     def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
              standalone_mode: bool = True, **extra: Any) -> Any:
         code = 0
-        state.signal_exit, state.signal_reported, state.verbose = EX_SIGINT, False, False
+        state.signal_exit, state.signal_reported, state.signal_received, state.verbose = EX_SIGINT, False, False, False
         try:
             with _signal_handlers():
                 rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
@@ -210,6 +213,8 @@ class LensoptGroup(TyperGroup):
             code = report_signal()
         except typer.Exit as err:
             code = err.exit_code
+        if state.signal_received:  # a signal came during the command: its code and one line, whatever followed
+            code = report_signal()
         if not standalone_mode:
             return code
         sys.exit(code)

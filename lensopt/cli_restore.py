@@ -50,12 +50,12 @@ def stop_on_signals() -> Iterator[list[bool]]:
     flag = [False]
     old = {}
 
-    from lensopt.cli_common import state
+    from lensopt.cli_common import Interrupted, state
 
     def handler(signum: int, frame: Any) -> None:
         if flag[0] and signum == signal.SIGINT:
-            raise KeyboardInterrupt
-        state.signal_exit = 143 if signum == signal.SIGTERM else 130
+            raise Interrupted  # not KeyboardInterrupt itself: see lensopt/cli_process.py
+        state.signal_exit, state.signal_received = (143 if signum == signal.SIGTERM else 130), True
         flag[0] = True
 
     for sig in (signal.SIGINT, signal.SIGTERM):
