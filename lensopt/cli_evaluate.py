@@ -20,12 +20,14 @@ __all__ = ["register"]
 def register(app: typer.Typer, plot_app: typer.Typer | None = None) -> None:
     """Add the ``evaluate`` command to ``app`` (and ``plot regions`` to ``plot_app``)."""
     from lensopt.cli import JsonOpt, LensArg, console, err_console, handle_errors, load_model, print_json
+    from lensopt.cli_backend import BackendOpt, with_backend
 
     if plot_app is not None:
         _register_plot(plot_app)
 
     @app.command()
     @handle_errors
+    @with_backend(err_console)
     def evaluate(
         lens: LensArg,
         images: Annotated[Path | None, typer.Option("--images", help="Folder of PNG/JPEG/TIFF/EXR images (DIV2K: "
@@ -44,6 +46,7 @@ def register(app: typer.Typer, plot_app: typer.Typer | None = None) -> None:
         as_json: JsonOpt = False,
         irm: Annotated[Path | None, typer.Option("--irm", help="Restoration network checkpoint (train-irm or "
                                                  "joint): score before and after restoration.")] = None,
+        backend: BackendOpt = "auto",
     ) -> None:
         """Pre-restoration PSNR and SSIM of central crops, each paired with a sensor tile (S4.3.1)."""
         from lensopt.cli_imaging import parse_grid
