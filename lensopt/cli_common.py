@@ -34,7 +34,8 @@ except ImportError:  # pragma: no cover
 from lensopt.cli_process import EX_SIGINT, EX_SIGTERM, Interrupted, Terminated, state
 from lensopt.errors import LensoptError
 
-__all__ = ["AimOpt", "AimStepsOpt", "check_seed", "EX_INTERNAL", "JsonOpt", "LensArg", "SamplingOpt", "SeedOpt",
+__all__ = ["AimOpt", "AimStepsOpt", "check_seed", "DeviceOpt", "EX_INTERNAL", "JsonOpt", "LensArg", "SamplingOpt",
+           "SeedOpt",
            "Interrupted", "Terminated", "check_output", "console", "err_console", "handle_errors", "LensoptGroup",
            "report_signal", "signals_deferred", "state", "print_json", "LowerLevelFormatter"]
 
@@ -62,6 +63,8 @@ AimStepsOpt = Annotated[int | None, typer.Option("--aim-steps",
 SeedOpt = Annotated[int, typer.Option("--seed", callback=check_seed,
                                       help="Seed of every random draw (pupil jitter), 0 to 2**63 - 1.")]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object instead of tables.")]
+DeviceOpt = Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N | auto: where the lens is traced and the "
+                                        "images are computed.")]
 
 
 def _one_line(text: str) -> str:

@@ -79,10 +79,12 @@ def plan_scene(
 
 def run_plan(camera: Camera | ProvidesCamera, plan: ScenePlan, pilot: Pilot, region: Region, sensor: Sensor,
              image: np.ndarray, options: PlanOptions, timings: dict[str, float] | None = None) -> SimulationResult:
-    """Simulate ``image`` (H, W, C linear float32) as planned."""
+    """Simulate ``image`` (H, W, C linear float32) as planned, on the device of the camera's lens (the
+    result comes back as a NumPy array)."""
     timings = {} if timings is None else timings
     camera = as_camera(camera)
-    out = torch.from_numpy(np.ascontiguousarray(image, dtype=np.float32)).permute(2, 0, 1).contiguous()
+    device = camera.lens.device
+    out = torch.from_numpy(np.ascontiguousarray(image, dtype=np.float32)).permute(2, 0, 1).contiguous().to(device)
     eff = plan.effects
     px_mm = plan.pixel_um * 1e-3
     if eff["distortion"]["on"]:
@@ -98,13 +100,13 @@ def run_plan(camera: Camera | ProvidesCamera, plan: ScenePlan, pilot: Pilot, reg
                                pitch_mm=plan.psf["pitch_um"] * 1e-3, oversample=options.oversample,
                                diffraction="heuristic" if plan.diffraction["on"] else "none", seed=options.seed)
         with _timed(timings, "trace + PSFs"), torch.no_grad():
-            rel = torch.tensor(plan.fields_relative, dtype=lens.dtype)
+            rel = torch.tensor(plan.fields_relative, dtype=lens.dtype, device=device)
             fo = first_order(camera.lens, camera.system)
             stack = compute_psfs(lens, system, rel, settings, fo=fo)
         with _timed(timings, "PSF grid"), torch.no_grad():
-            radius = np.abs(stack.center[:, 1].numpy())
-            wf = torch.from_numpy(field_weights(radius, region, sensor, plan.psf_grid))
-            ww = torch.tensor(plan.channel_weights, dtype=torch.float64)
+            radius = np.abs(stack.center[:, 1].cpu().numpy())
+            wf = torch.from_numpy(field_weights(radius, region, sensor, plan.psf_grid)).to(device)
+            ww = torch.tensor(plan.channel_weights, dtype=torch.float64, device=device)
             grid = build_psf_grid(stack.psf, ww, wf, cell_centers_mm(region, sensor, plan.psf_grid),
                                   pitch_mm=stack.pitch_mm, pixel_mm=px_mm).to(torch.float32)
         with _timed(timings, "convolution"):
@@ -112,5 +114,5 @@ def run_plan(camera: Camera | ProvidesCamera, plan: ScenePlan, pilot: Pilot, reg
     if eff["noise"]["on"]:
         with _timed(timings, "noise"):
             out = add_noise(out, eff["noise"]["sigma"], seed=eff["noise"]["seed"])
-    result = out.permute(1, 2, 0).numpy()  # a view; made contiguous by the caller if needed
+    result = out.permute(1, 2, 0).cpu().numpy()  # on the CPU a view; made contiguous by the caller if needed
     return SimulationResult(result, grid, stack, timings)
