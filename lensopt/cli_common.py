@@ -124,27 +124,78 @@ def report_signal(line: str | None = None) -> int:
     return state.signal_exit
 
 
+# Raising from a signal handler is safe in Python code, not while a module is being imported: extension
+# modules run their initialisation through Python callbacks that cannot pass an exception on (torch's
+# pybind11 code then calls std::terminate — exit −6 —, numpy's cannot be imported again). A signal that
+# lands inside an import is delivered again RETRY_S later, until the import is over.
+RETRY_S = 0.01
+_retry_signal: list[int] = []
+_unraisable_hooks: list[Any] = []  # the hook in force before the command's
+
+
+def _in_import(frame: Any) -> bool:
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib._bootstrap"):
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _deliver(signum: int, frame: Any, exc: type[KeyboardInterrupt], code: int) -> None:
+    state.signal_exit, state.signal_received = code, True
+    if _in_import(frame) and hasattr(signal, "setitimer"):
+        _retry_signal[:] = [signum]
+        signal.setitimer(signal.ITIMER_REAL, RETRY_S)  # → _on_retry
+        return
+    raise exc()
+
+
+def _on_retry(signum: int, frame: Any) -> None:
+    """SIGALRM: deliver the deferred signal again, to whatever handler is in force now."""
+    if _retry_signal:
+        signal.raise_signal(_retry_signal.pop())
+
+
+def _on_unraisable(unraisable: Any) -> None:
+    """A signal's exception raised inside a finalizer (``__del__``, a weakref or gc callback), where Python
+    can only print it and drop it: deliver the signal again instead, outside the finalizer."""
+    exc = unraisable.exc_value
+    if isinstance(exc, Interrupted | Terminated) and hasattr(signal, "setitimer"):
+        _retry_signal[:] = [signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT]
+        signal.setitimer(signal.ITIMER_REAL, RETRY_S)
+        return
+    (_unraisable_hooks[-1] if _unraisable_hooks else sys.__unraisablehook__)(unraisable)
+
+
 def _on_sigterm(signum: int, frame: Any) -> None:
-    state.signal_exit, state.signal_received = EX_SIGTERM, True
-    raise Terminated()
+    _deliver(signum, frame, Terminated, EX_SIGTERM)
 
 
 def _on_sigint(signum: int, frame: Any) -> None:
-    state.signal_exit, state.signal_received = EX_SIGINT, True
-    raise Interrupted()  # not KeyboardInterrupt itself: see lensopt/cli_process.py
+    _deliver(signum, frame, Interrupted, EX_SIGINT)  # not KeyboardInterrupt itself: see lensopt/cli_process.py
 
 
 @contextlib.contextmanager
 def _signal_handlers() -> Iterator[None]:
-    """SIGINT → Interrupted, SIGTERM → Terminated (both KeyboardInterrupts) while a command runs."""
+    """SIGINT → Interrupted, SIGTERM → Terminated (both KeyboardInterrupts) while a command runs; a signal
+    inside an import or a finalizer is delivered again when it can be raised (SIGALRM, ``RETRY_S``)."""
+    handlers = [(signal.SIGINT, _on_sigint), (signal.SIGTERM, _on_sigterm)]
+    if hasattr(signal, "SIGALRM"):
+        handlers.append((signal.SIGALRM, _on_retry))
     try:
-        old = {s: signal.signal(s, h) for s, h in ((signal.SIGINT, _on_sigint), (signal.SIGTERM, _on_sigterm))}
+        old = {s: signal.signal(s, h) for s, h in handlers}
     except ValueError:  # not the main thread (an embedding application): leave signals alone
         yield
         return
+    _unraisable_hooks.append(sys.unraisablehook)
+    sys.unraisablehook = _on_unraisable
     try:
         yield
     finally:
+        if hasattr(signal, "setitimer"):
+            signal.setitimer(signal.ITIMER_REAL, 0)  # a retry not yet due: the exit code already says it
+        _retry_signal.clear()
+        sys.unraisablehook = _unraisable_hooks.pop()
         for s, h in old.items():
             signal.signal(s, h)
 

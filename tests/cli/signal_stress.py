@@ -63,7 +63,8 @@ def one(sig: int, delay: float, window: str) -> str:
         return "one_line"
     if proc.returncode == 0 and not err.strip() and DONE in out:
         return "finished"
-    return f"rc={proc.returncode} stderr={err.strip()[-200:]!r}"
+    text = err.strip()
+    return f"rc={proc.returncode} stderr={text if len(text) < 700 else text[:400] + ' … ' + text[-250:]!r}"
 
 
 def delays(window: str, count: int) -> list[float]:
