@@ -31,7 +31,7 @@ try:  # typer ≥ 0.20 vendors click
 except ImportError:  # pragma: no cover
     from click import exceptions as click_exc  # type: ignore[no-redef]
 
-from lensopt.cli_process import EX_SIGINT, EX_SIGTERM, Interrupted, Terminated, state
+from lensopt.cli_process import EX_SIGINT, EX_SIGTERM, Interrupted, Terminated, is_cli_process, state
 from lensopt.errors import LensoptError
 
 __all__ = ["AimOpt", "AimStepsOpt", "check_seed", "DeviceOpt", "EX_INTERNAL", "JsonOpt", "LensArg", "SamplingOpt",
@@ -130,6 +130,7 @@ def report_signal(line: str | None = None) -> int:
 # lands inside an import is delivered again RETRY_S later, until the import is over.
 RETRY_S = 0.01
 _retry_signal: list[int] = []
+_retrying: list[bool] = []  # per nested _signal_handlers: whether signals are retried (the real process)
 _unraisable_hooks: list[Any] = []  # the hook in force before the command's
 
 
@@ -143,7 +144,7 @@ def _in_import(frame: Any) -> bool:
 
 def _deliver(signum: int, frame: Any, exc: type[KeyboardInterrupt], code: int) -> None:
     state.signal_exit, state.signal_received = code, True
-    if _in_import(frame) and hasattr(signal, "setitimer"):
+    if _retrying and _retrying[-1] and _in_import(frame):
         _retry_signal[:] = [signum]
         signal.setitimer(signal.ITIMER_REAL, RETRY_S)  # → _on_retry
         return
@@ -160,7 +161,7 @@ def _on_unraisable(unraisable: Any) -> None:
     """A signal's exception raised inside a finalizer (``__del__``, a weakref or gc callback), where Python
     can only print it and drop it: deliver the signal again instead, outside the finalizer."""
     exc = unraisable.exc_value
-    if isinstance(exc, Interrupted | Terminated) and hasattr(signal, "setitimer"):
+    if isinstance(exc, Interrupted | Terminated) and _retrying and _retrying[-1]:
         _retry_signal[:] = [signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT]
         signal.setitimer(signal.ITIMER_REAL, RETRY_S)
         return
@@ -176,26 +177,32 @@ def _on_sigint(signum: int, frame: Any) -> None:
 
 
 @contextlib.contextmanager
-def _signal_handlers() -> Iterator[None]:
-    """SIGINT → Interrupted, SIGTERM → Terminated (both KeyboardInterrupts) while a command runs; a signal
-    inside an import or a finalizer is delivered again when it can be raised (SIGALRM, ``RETRY_S``)."""
+def _signal_handlers(retry: bool | None = None) -> Iterator[None]:
+    """SIGINT → Interrupted, SIGTERM → Terminated (both KeyboardInterrupts) while a command runs. With
+    ``retry`` (default: in the real ``lensopt`` process only, so that in-process runs keep their SIGALRM
+    and unraisable hook), a signal inside an import or a finalizer is delivered again when it can be
+    raised (SIGALRM, ``RETRY_S``)."""
+    retry = (is_cli_process() if retry is None else retry) and hasattr(signal, "setitimer")
     handlers = [(signal.SIGINT, _on_sigint), (signal.SIGTERM, _on_sigterm)]
-    if hasattr(signal, "SIGALRM"):
+    if retry:
         handlers.append((signal.SIGALRM, _on_retry))
     try:
         old = {s: signal.signal(s, h) for s, h in handlers}
     except ValueError:  # not the main thread (an embedding application): leave signals alone
         yield
         return
-    _unraisable_hooks.append(sys.unraisablehook)
-    sys.unraisablehook = _on_unraisable
+    _retrying.append(retry)
+    if retry:
+        _unraisable_hooks.append(sys.unraisablehook)
+        sys.unraisablehook = _on_unraisable
     try:
         yield
     finally:
-        if hasattr(signal, "setitimer"):
+        if retry:
             signal.setitimer(signal.ITIMER_REAL, 0)  # a retry not yet due: the exit code already says it
-        _retry_signal.clear()
-        sys.unraisablehook = _unraisable_hooks.pop()
+            _retry_signal.clear()
+            sys.unraisablehook = _unraisable_hooks.pop()
+        _retrying.pop()
         for s, h in old.items():
             signal.signal(s, h)
 

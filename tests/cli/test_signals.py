@@ -53,10 +53,17 @@ def test_in_process_runs_get_no_process_handlers() -> None:
     assert cli_process.is_cli_process(["/venv/bin/lensopt", "trace"], ["/venv/bin/python", "/venv/bin/lensopt"])
     assert cli_process.is_cli_process(["/x/lensopt/__main__.py"], ["python", "-m", "lensopt", "trace"])
     assert not cli_process.is_cli_process(["pytest"], ["python", "-m", "pytest", "-k", "lensopt"])
-    before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
+    sigs = (signal.SIGINT, signal.SIGTERM, signal.SIGALRM)
+    before = [signal.getsignal(s) for s in sigs], sys.unraisablehook
     r = CliRunner().invoke(app, ["--version"])
     assert r.exit_code == 0
-    assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == before
+    assert ([signal.getsignal(s) for s in sigs], sys.unraisablehook) == before
+
+    from lensopt.cli_common import _signal_handlers
+
+    with _signal_handlers():  # in-process: SIGINT/SIGTERM only, no SIGALRM retry, the runner's unraisable hook
+        seen = [signal.getsignal(signal.SIGALRM), sys.unraisablehook]
+    assert seen == [before[0][2], before[1]]
     assert signal.pthread_sigmask(signal.SIG_BLOCK, []) == set()  # no mask left behind (it leaks into children)
 
 
@@ -102,7 +109,7 @@ def test_a_signal_inside_an_import_waits_for_its_end(tmp_path) -> None:  # noqa:
         from lensopt.cli_common import _signal_handlers, state
         log = []
         try:
-            with _signal_handlers():
+            with _signal_handlers(retry=True):
                 threading.Timer(0.1, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
                 import slowmod
                 log.append("imported")
@@ -133,7 +140,7 @@ def test_a_signal_inside_a_finalizer_is_not_printed_and_dropped() -> None:
                     pass
         log = []
         try:
-            with _signal_handlers():
+            with _signal_handlers(retry=True):
                 threading.Timer(0.1, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
                 obj = Slow()
                 del obj
