@@ -44,6 +44,19 @@ def parse_frequencies(text: str, path: str) -> list[float]:
         raise LensoptError("expected comma-separated numbers (cycles/mm)", path=path, got=text) from None
 
 
+def parse_fields(text: str) -> Any:
+    """``--fields``: ``y``, ``xy`` or relative field points ``x,y;x,y;…``."""
+    if text.strip() in ("y", "xy"):
+        return text.strip()
+    try:
+        pts = [tuple(float(v) for v in part.split(",")) for part in text.split(";") if part.strip()]
+    except ValueError:
+        pts = []
+    if not pts or any(len(p) != 2 or not all(map(math.isfinite, p)) for p in pts):
+        raise LensoptError("expected y, xy or relative field points x,y;x,y;…", path="--fields", got=text)
+    return pts
+
+
 def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, workers: int, out_dir: Path | None,
                      worst: int, inverse_delta: float | None, sensitivity: bool = True,
                      compiled: bool = False) -> dict[str, Any]:
@@ -72,6 +85,7 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
     report: dict[str, Any] = {
         "lens": model.spec.name, "metric": job.metric, "unit": unit, "higher_is_better": HIGHER_IS_BETTER[job.metric],
         "sampling": settings.sampling, "compensator": settings.compensator, "seed": settings.seed,
+        "fields": (model.system.rel_field if job.setup.field_xy is None else job.setup.field_xy.tolist()),
         "nominal": {"value": m0, "focus_shift_mm": float(nominal["focus_shift"][0]),
                     "esr_um": float(nominal["esr"][0] * 1e3)},
         "tolerances": [{"name": t.name, "kind": t.kind, "target": t.target, "limit": t.limit,
@@ -149,7 +163,7 @@ def _plots(out_dir: Path, report: dict[str, Any], mc: Any, rows: list[Any], metr
 def _render(console: Any, r: dict[str, Any], top: int = 15) -> None:
     unit = r["unit"]
     console.print(f"[bold]{r['lens']}[/] — metric {r['metric']} {unit}, compensator {r['compensator']}, "
-                  f"sampling {r['sampling']}; nominal {r['nominal']['value']:.4f} "
+                  f"sampling {r['sampling']}, {len(r['fields'])} fields; nominal {r['nominal']['value']:.4f} "
                   f"(focus shift {r['nominal']['focus_shift_mm'] * 1e3:+.1f} µm), {len(r['tolerances'])} tolerances")
     if "sensitivity" in r:
         t = Table(title=f"Sensitivity (Δ {r['metric']} at ∓limit), inverse for Δ = {r['inverse_target']:.4g}")
@@ -213,6 +227,8 @@ def register(app: typer.Typer, plot_app: typer.Typer) -> None:
         mtf_frequency: Annotated[float | None, typer.Option("--mtf-frequency", help="cycles/mm of the MTF "
                                                             "metric.")] = None,
         sampling: Annotated[str | None, typer.Option("--sampling", help="Pupil sampling per trial.")] = None,
+        fields: Annotated[str | None, typer.Option("--fields", help="y (the +y fields), xy (±x and ±y) or "
+                                                   "relative points x,y;x,y;… (decentered lenses).")] = None,
         compensator: Annotated[str | None, typer.Option("--compensator", help="focus | lm | none (lm: "
                                                         "the spec's variables by a few LM steps).")] = None,
         scheduler: Annotated[str, typer.Option("--scheduler", help="local (a 2-worker Dask LocalCluster), "
@@ -242,7 +258,9 @@ def register(app: typer.Typer, plot_app: typer.Typer) -> None:
             base = ToleranceSpec(profile="s6.2")
         changes = {k: v for k, v in {"profile": profile, "trials": trials, "seed": seed, "metric": metric,
                                      "mtf_frequency": mtf_frequency, "sampling": sampling,
-                                     "compensator": compensator}.items() if v is not None}
+                                     "compensator": compensator,
+                                     "fields": None if fields is None else parse_fields(fields)}.items()
+                   if v is not None}
         try:
             settings = ToleranceSpec.model_validate({**base.model_dump(), **changes})
         except Exception as err:  # pydantic ValidationError → one line naming the option

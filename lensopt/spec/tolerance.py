@@ -48,7 +48,9 @@ class ToleranceItemSpec(_Model):
 class ToleranceSpec(_Model):
     """Settings of ``lensopt tolerance``; ``profile`` starts from a named set (S6.2), ``items`` add to it.
     ``compensator = "lm"``: the back focus in closed form plus the spec's variables (``vary`` radius and
-    thickness entries) re-optimized by ``lm_steps`` Levenberg–Marquardt steps per trial."""
+    thickness entries) re-optimized by ``lm_steps`` Levenberg–Marquardt steps per trial.
+    ``fields``: ``y`` (the system's +y fields), ``xy`` (each system field h at (0, ±h) and (±h, 0), its
+    weight shared among the four) or a list of relative (x, y) field points (uniform weights)."""
 
     profile: Literal["s6.2"] | None = None
     items: list[ToleranceItemSpec] = Field(default_factory=list)
@@ -61,12 +63,15 @@ class ToleranceSpec(_Model):
     metric: Literal["esr", "rms", "mtf", "distortion"] = "esr"
     mtf_frequency: float | None = Field(default=None, gt=0)
     sampling: str = "rings:12"
+    fields: Literal["y", "xy"] | list[tuple[float, float]] = "y"
     chunk: int = Field(default=25, ge=1, le=10_000)
 
     @model_validator(mode="after")
     def _something(self) -> ToleranceSpec:
         if self.profile is None and not self.items:
             raise ValueError("give a profile (\"s6.2\") or at least one item")
+        if isinstance(self.fields, list) and not self.fields:
+            raise ValueError("@fields: give \"y\", \"xy\" or at least one [x, y] relative field")
         if self.metric == "mtf" and self.mtf_frequency is None:
             raise ValueError("@mtf_frequency: the mtf metric needs a frequency (cycles/mm)")
         return self
