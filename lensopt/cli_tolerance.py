@@ -16,7 +16,7 @@ from lensopt.errors import LensoptError
 
 __all__ = ["register", "mtf_report", "tolerance_report"]
 
-_METRIC_UNITS = {"esr": "µm", "rms": "µm", "mtf": "", "distortion": "%"}
+_METRIC_UNITS = {"esr": "µm", "rms": "µm", "mtf": "", "distortion": "%", "psnr": "dB"}
 
 
 def mtf_report(model: Any, frequencies: list[float], *, method: str = "heuristic",
@@ -59,8 +59,10 @@ def parse_fields(text: str) -> Any:
 
 def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, workers: int, out_dir: Path | None,
                      worst: int, inverse_delta: float | None, sensitivity: bool = True,
-                     compiled: bool = False) -> dict[str, Any]:
-    """Run sensitivity and Monte Carlo; write plots and worst trials under ``out_dir``; plain data."""
+                     compiled: bool = False, restore: Any = None) -> dict[str, Any]:
+    """Run sensitivity and Monte Carlo; write plots and worst trials under ``out_dir``; plain data.
+    ``restore``: the restoration hook of the psnr metric (``--irm``)."""
+    import numpy as np
     import torch
 
     from lensopt.spec.io import save_json
@@ -74,7 +76,7 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
     )
     from lensopt.tolerance.run import sensitivity as run_sensitivity
 
-    job = make_job(model, settings)
+    job = make_job(model, settings, restore=restore)
     if compiled:
         import dataclasses
 
@@ -87,7 +89,8 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
         "sampling": settings.sampling, "compensator": settings.compensator, "seed": settings.seed,
         "fields": (model.system.rel_field if job.setup.field_xy is None else job.setup.field_xy.tolist()),
         "nominal": {"value": m0, "focus_shift_mm": float(nominal["focus_shift"][0]),
-                    "esr_um": float(nominal["esr"][0] * 1e3)},
+                    "esr_um": float(nominal["esr"][0] * 1e3),
+                    **{f"{k}_db": float(nominal[k][0]) for k in ("psnr_pre", "psnr_post") if k in nominal}},
         "tolerances": [{"name": t.name, "kind": t.kind, "target": t.target, "limit": t.limit,
                         "distribution": t.distribution} for t in job.tols],
     }
@@ -114,7 +117,12 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
             for rank, k in enumerate(mc.worst(worst)):
                 params = job.params(torch.from_numpy(mc.values[k:k + 1]))
                 offsets = mc.metrics["lm_offsets"][k] if "lm_offsets" in mc.metrics else None
-                spec = trial_spec(model, params, float(mc.metrics["focus_shift"][k]),
+                dz = float(mc.metrics["focus_shift"][k])
+                if job.psnr is not None:  # imaged with the compensators relative to the nominal's
+                    dz -= job.psnr.focus_reference
+                    if offsets is not None and job.psnr.lm_reference is not None:
+                        offsets = offsets - np.asarray(job.psnr.lm_reference)
+                spec = trial_spec(model, params, dz,
                                   name=f"{model.spec.name} — tolerance trial {k} (rank {rank + 1} worst)",
                                   lm_vars=job.setup.lm_vars, lm_offsets=offsets)
                 path = out_dir / f"worst_{rank + 1}_trial_{k}.json"
@@ -141,6 +149,7 @@ def _describe(v: Any) -> dict[str, float]:
 
 def _plots(out_dir: Path, report: dict[str, Any], mc: Any, rows: list[Any], metric: str, unit: str,
            name: str) -> None:
+    higher = bool(report["higher_is_better"])
     from lensopt.plot.style import save_figure
     from lensopt.plot.tolerance import cdf_figure, histogram_figure, sensitivity_figure
 
@@ -150,7 +159,8 @@ def _plots(out_dir: Path, report: dict[str, Any], mc: Any, rows: list[Any], metr
         rss = report.get("rss")
         pred = (rss["mean"], rss["std"]) if rss else None
         m0 = report["nominal"]["value"]
-        save_figure(cdf_figure(mc.scalar, metric=label, nominal=m0, title=name, predicted=pred), out_dir / "cdf.png")
+        save_figure(cdf_figure(mc.scalar, metric=label, nominal=m0, title=name, predicted=pred,
+                                       higher_is_better=higher), out_dir / "cdf.png")
         save_figure(histogram_figure(mc.scalar, metric=label, nominal=m0, title=name), out_dir / "histogram.png")
         files += ["cdf.png", "histogram.png"]
     if rows:
@@ -223,7 +233,10 @@ def register(app: typer.Typer, plot_app: typer.Typer) -> None:
         trials: Annotated[int | None, typer.Option("--trials", min=0, help="Monte-Carlo trials (0: none).")] = None,
         seed: Annotated[int | None, typer.Option("--seed", callback=check_seed,
                                                      help="Seed of the draws and the pupil jitter.")] = None,
-        metric: Annotated[str | None, typer.Option("--metric", help="esr | rms | mtf | distortion.")] = None,
+        metric: Annotated[str | None, typer.Option("--metric", help="esr | rms | mtf | distortion | psnr.")] = None,
+        irm: Annotated[Path | None, typer.Option("--irm", help="Restoration network checkpoint (train-irm or "
+                                                 "joint): the psnr metric after restoration (implies "
+                                                 "--metric psnr).")] = None,
         mtf_frequency: Annotated[float | None, typer.Option("--mtf-frequency", help="cycles/mm of the MTF "
                                                             "metric.")] = None,
         sampling: Annotated[str | None, typer.Option("--sampling", help="Pupil sampling per trial.")] = None,
@@ -256,6 +269,8 @@ def register(app: typer.Typer, plot_app: typer.Typer) -> None:
                 raise LensoptError("the lens has no [tolerance] section; give --tolerances FILE or --profile s6.2",
                                    path="--tolerances")
             base = ToleranceSpec(profile="s6.2")
+        if irm is not None and metric is None:
+            metric = "psnr"
         changes = {k: v for k, v in {"profile": profile, "trials": trials, "seed": seed, "metric": metric,
                                      "mtf_frequency": mtf_frequency, "sampling": sampling,
                                      "compensator": compensator,
@@ -268,9 +283,17 @@ def register(app: typer.Typer, plot_app: typer.Typer) -> None:
             where = "--" + str(first["loc"][0]).replace("_", "-") if first["loc"] else "--tolerances"
             raise LensoptError(first["msg"], path=where) from None
         sched = None if scheduler == "serial" else scheduler
+        hook = None
+        if irm is not None:
+            if settings.metric != "psnr":
+                raise LensoptError("--irm scores PSNR after restoration: use it with --metric psnr", path="--irm",
+                                   got=settings.metric)
+            from lensopt.cli_restore import irm_hook
+
+            hook = irm_hook(model, irm)
         report = tolerance_report(model, settings, scheduler=sched, workers=workers, out_dir=output_dir,
                                   worst=worst, inverse_delta=inverse_delta, sensitivity=not no_sensitivity,
-                                  compiled=compile_)
+                                  compiled=compile_, restore=hook)
         if as_json:
             print_json(report)
         else:

@@ -19,12 +19,13 @@ from torch import Tensor
 from lensopt.optics.lens import Lens, System
 from lensopt.tolerance.evaluate import EvalSetup, evaluate
 from lensopt.tolerance.model import Tolerance, TrialParams, draw, perturb
+from lensopt.tolerance.psnr import PsnrSetup, trial_lens, trial_psnr
 
 __all__ = ["Job", "run_trials", "sensitivity", "monte_carlo", "yield_table", "rss_prediction", "scalar_metric",
            "LEVELS", "HIGHER_IS_BETTER", "MonteCarlo", "SensitivityRow", "moments", "nominal_metrics"]
 
 LEVELS = (0.5, 0.8, 0.9, 0.95, 0.99)
-HIGHER_IS_BETTER = {"esr": False, "rms": False, "mtf": True, "distortion": False}
+HIGHER_IS_BETTER = {"esr": False, "rms": False, "mtf": True, "distortion": False, "psnr": True}
 
 
 @dataclass(frozen=True)
@@ -38,6 +39,7 @@ class Job:
         semi_aperture: (S,) semi-apertures, mm (fringes).
         metric: the metric of the yield table and the sensitivities: esr, rms, mtf or distortion.
         chunk: trials per vmapped call.
+        psnr: imaging of every trial for the ``psnr`` metric (``tolerance.psnr``), or None.
         compiled: run the vmapped evaluation under ``torch.compile`` (one compilation per process and
             chunk size, minutes on a loaded 2-core machine; then ~3× faster per trial at rings:24). The
             last chunk is padded to the chunk size so that it does not compile again.
@@ -50,6 +52,7 @@ class Job:
     metric: str = "esr"
     chunk: int = 25
     compiled: bool = False
+    psnr: PsnrSetup | None = None
 
     @property
     def lens(self) -> Lens:
@@ -64,8 +67,8 @@ class Job:
 
 
 def scalar_metric(out: dict[str, np.ndarray], metric: str) -> np.ndarray:
-    """(K,) one number per trial: ESR (µm), worst-field RMS (µm), worst MTF over fields and S/T, or
-    |distortion| at the full field (%)."""
+    """(K,) one number per trial: ESR (µm), worst-field RMS (µm), worst MTF over fields and S/T,
+    |distortion| at the full field (%), or PSNR (dB; after restoration when a network is given)."""
     if metric == "esr":
         return out["esr"] * 1e3
     if metric == "rms":
@@ -76,6 +79,10 @@ def scalar_metric(out: dict[str, np.ndarray], metric: str) -> np.ndarray:
         return np.minimum(out["mtf_s"], out["mtf_t"]).min(-1)
     if metric == "distortion":
         return np.abs(out["distortion"])
+    if metric == "psnr":
+        if "psnr_pre" not in out:
+            raise ValueError("the psnr metric needs the imaging setup (Job.psnr)")
+        return out["psnr_post"] if "psnr_post" in out else out["psnr_pre"]
     raise ValueError(f"metric must be one of {tuple(HIGHER_IS_BETTER)}, got {metric!r}")
 
 
@@ -95,7 +102,19 @@ def _chunk_eval(job: Job, values: Tensor) -> dict[str, np.ndarray]:
             out = fn(job.params(values))
         else:
             out = evaluate(job.setup, job.params(values))
-    return {name: v[:k].cpu().numpy() for name, v in out.items()}
+    res = {name: v[:k].cpu().numpy() for name, v in out.items()}
+    if job.psnr is not None:
+        res.update(_chunk_psnr(job, values[:k], res))
+    return res
+
+
+def _chunk_psnr(job: Job, values: Tensor, res: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """PSNR of every trial of a chunk (a loop over trials: image simulation is not batched)."""
+    params = job.params(values)
+    lenses = [trial_lens(job.lens, job.setup.placement, params.select(slice(i, i + 1)), float(res["focus_shift"][i]),
+                         res["lm_offsets"][i] if "lm_offsets" in res else None, job.psnr)
+              for i in range(values.shape[0])]
+    return trial_psnr(job.psnr, lenses)
 
 
 def run_trials(job: Job, values: Tensor, *, scheduler: str | None = None, workers: int = 2) -> dict[str, np.ndarray]:
