@@ -87,6 +87,7 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
     report: dict[str, Any] = {
         "lens": model.spec.name, "metric": job.metric, "unit": unit, "higher_is_better": HIGHER_IS_BETTER[job.metric],
         "sampling": settings.sampling, "compensator": settings.compensator, "seed": settings.seed,
+        "aim": settings.aim,
         "fields": (model.system.rel_field if job.setup.field_xy is None else job.setup.field_xy.tolist()),
         "nominal": {"value": m0, "focus_shift_mm": float(nominal["focus_shift"][0]),
                     "esr_um": float(nominal["esr"][0] * 1e3),
@@ -242,6 +243,8 @@ def register(app: typer.Typer, plot_app: typer.Typer) -> None:
         sampling: Annotated[str | None, typer.Option("--sampling", help="Pupil sampling per trial.")] = None,
         fields: Annotated[str | None, typer.Option("--fields", help="y (the +y fields), xy (±x and ±y) or "
                                                    "relative points x,y;x,y;… (decentered lenses).")] = None,
+        aim: Annotated[str | None, typer.Option("--aim", help="none | chief: aim each trial's chief rays at "
+                                                "its own (decentered) stop centre.")] = None,
         compensator: Annotated[str | None, typer.Option("--compensator", help="focus | lm | none (lm: "
                                                         "the spec's variables by a few LM steps).")] = None,
         scheduler: Annotated[str, typer.Option("--scheduler", help="local (a 2-worker Dask LocalCluster), "
@@ -273,7 +276,7 @@ def register(app: typer.Typer, plot_app: typer.Typer) -> None:
             metric = "psnr"
         changes = {k: v for k, v in {"profile": profile, "trials": trials, "seed": seed, "metric": metric,
                                      "mtf_frequency": mtf_frequency, "sampling": sampling,
-                                     "compensator": compensator,
+                                     "compensator": compensator, "aim": aim,
                                      "fields": None if fields is None else parse_fields(fields)}.items()
                    if v is not None}
         try:

@@ -51,6 +51,7 @@ class ToleranceSpec(_Model):
     thickness entries) re-optimized by ``lm_steps`` Levenberg–Marquardt steps per trial.
     ``fields``: ``y`` (the system's +y fields), ``xy`` (each system field h at (0, ±h) and (±h, 0), its
     weight shared among the four) or a list of relative (x, y) field points (uniform weights).
+    ``aim = "chief"``: every trial's chief rays aimed at the centre of its own (decentered, tilted) stop.
     ``metric = "psnr"``: ``psnr_count`` seeded dead-leaves scenes of ``psnr_patch`` pixels imaged as
     ``lensopt evaluate`` does (``psnr_sampling`` rays per PSF, ``psnr_noise``), restored by ``--irm``'s
     network when given (``lensopt.tolerance.psnr``)."""
@@ -67,6 +68,7 @@ class ToleranceSpec(_Model):
     mtf_frequency: float | None = Field(default=None, gt=0)
     sampling: str = "rings:12"
     fields: Literal["y", "xy"] | list[tuple[float, float]] = "y"
+    aim: Literal["none", "chief"] = "none"
     chunk: int = Field(default=25, ge=1, le=10_000)
     psnr_count: int = Field(default=4, ge=1, le=10_000)
     psnr_patch: int = Field(default=64, ge=8, le=4096)

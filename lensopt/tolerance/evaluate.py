@@ -61,6 +61,9 @@ class EvalSetup:
             rotationally symmetric lens gives the same spot, turned, at every azimuth); ``pupil`` must
             then be the full pupil (``half`` False).
         field_weights: (F,) weights of ``field_xy`` in the ESR (None: uniform).
+        aim: ``none`` (every trial fills the nominal paraxial entrance pupil) or ``chief`` (each trial's
+            chief rays aimed at the centre of its own, possibly decentered or tilted, stop, in x and y;
+            ``optics.aiming``).
     """
 
     lens: Lens
@@ -75,6 +78,7 @@ class EvalSetup:
     lm_steps: int = 5
     field_xy: Tensor | None = None
     field_weights: tuple[float, ...] | None = None
+    aim: str = "none"
 
 
 def _centroid(u: Tensor, w: Tensor, half: bool) -> Tensor:
@@ -148,14 +152,14 @@ def _azimuth(lens: Lens, system: System, field_xy: Tensor) -> tuple[Tensor, Tens
 def _trace(setup: EvalSetup, lens: Lens) -> tuple[Bundle, Tensor | None]:
     """The trial's bundle; for two-dimensional fields also the unit field directions (F, 2)."""
     if setup.field_xy is None:
-        return trace_bundle(lens, setup.system, setup.pupil, half_pupil=setup.half, aim="none"), None
+        return trace_bundle(lens, setup.system, setup.pupil, half_pupil=setup.half, aim=setup.aim), None
     _, _, s = _azimuth(lens, setup.system, setup.field_xy)
     px, py = setup.pupil[:, 0].to(lens.dtype), setup.pupil[:, 1].to(lens.dtype)
     sx, sy = s[:, 0:1], s[:, 1:2]
     # Turn the pupil with the field: (0, 1) → (sx, sy), (1, 0) → (sy, −sx).
     pupil = torch.stack([px * sy + py * sx, -px * sx + py * sy], -1)[:, None]  # (F, 1, P, 2)
     fxy = setup.field_xy.to(lens.dtype)
-    b = trace_bundle(lens, setup.system, pupil, half_pupil=False, aim="none", rel_field=fxy[:, 1],
+    b = trace_bundle(lens, setup.system, pupil, half_pupil=False, aim=setup.aim, rel_field=fxy[:, 1],
                      rel_field_x=fxy[:, 0])
     return b, s
 

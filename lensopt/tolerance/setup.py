@@ -150,7 +150,8 @@ def make_job(lens: Lens, system: System, media: Sequence[Material], settings: An
     setup = EvalSetup(lens, system, placement, pupil, half,
                       compensate=settings.compensator, focus_range=settings.focus_range,
                       mtf_frequency=settings.mtf_frequency, lm_vars=lm_vars,
-                      lm_steps=getattr(settings, "lm_steps", 5), field_xy=field_xy, field_weights=field_w)
+                      lm_steps=getattr(settings, "lm_steps", 5), field_xy=field_xy, field_weights=field_w,
+                      aim=getattr(settings, "aim", "none"))
     return Job(setup, tuple(tols), d_line_indices(media, dtype=lens.dtype), semi_apertures(lens, system),
                settings.metric, settings.chunk)
 
