@@ -46,14 +46,14 @@ def _settings(fields, **kw) -> ToleranceSpec:
     return ToleranceSpec.model_validate(base)
 
 
-@pytest.mark.parametrize("compensator", ["none", "focus"])
-def test_symmetric_lens_same_esr_at_every_azimuth(compensator: str) -> None:
+@pytest.mark.parametrize(("compensator", "aim"), [("none", "none"), ("focus", "none"), ("focus", "chief")])
+def test_symmetric_lens_same_esr_at_every_azimuth(compensator: str, aim: str) -> None:
     model = _model()
     values = torch.tensor([[0.0]], dtype=torch.float64)
     # A thickness tolerance keeps the lens symmetric (no placement: the +y run uses the half pupil).
     items = [{"kind": "thickness", "limit": 0.05, "surfaces": [0]}]
-    y = make_job(model, _settings("y", items=items, compensator=compensator, mtf_frequency=30.0))
-    xy = make_job(model, _settings("xy", items=items, compensator=compensator, mtf_frequency=30.0))
+    y = make_job(model, _settings("y", items=items, compensator=compensator, mtf_frequency=30.0, aim=aim))
+    xy = make_job(model, _settings("xy", items=items, compensator=compensator, mtf_frequency=30.0, aim=aim))
     assert y.setup.half and not xy.setup.half
     values = torch.tensor([[0.0], [0.04]], dtype=torch.float64)
     a, b = evaluate(y.setup, y.params(values)), evaluate(xy.setup, xy.params(values))
