@@ -174,7 +174,8 @@ def _plots(out_dir: Path, report: dict[str, Any], mc: Any, rows: list[Any], metr
 def _render(console: Any, r: dict[str, Any], top: int = 15) -> None:
     unit = r["unit"]
     console.print(f"[bold]{r['lens']}[/] — metric {r['metric']} {unit}, compensator {r['compensator']}, "
-                  f"sampling {r['sampling']}, {len(r['fields'])} fields; nominal {r['nominal']['value']:.4f} "
+                  f"sampling {r['sampling']}, {len(r['fields'])} fields, aim {r['aim']}; "
+                  f"nominal {r['nominal']['value']:.4f} "
                   f"(focus shift {r['nominal']['focus_shift_mm'] * 1e3:+.1f} µm), {len(r['tolerances'])} tolerances")
     if "sensitivity" in r:
         t = Table(title=f"Sensitivity (Δ {r['metric']} at ∓limit), inverse for Δ = {r['inverse_target']:.4g}")
