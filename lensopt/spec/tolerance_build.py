@@ -40,15 +40,21 @@ def make_job(model: Model, settings: Any, tols: list[Tolerance] | None = None, *
         raise LensoptError("the psnr metric images through the rotationally symmetric simulation path: "
                            "decenter/tilt tolerances and decentered lenses are not supported with it",
                            path="tolerance.metric", got="psnr")
+    from lensopt.imaging.regions import tile_grid
+    from lensopt.imaging.simulate import sensor_of
     from lensopt.spec.build import camera_of
     from lensopt.tolerance.evaluate import evaluate
     from lensopt.tolerance.psnr import PsnrSetup
 
+    # Settings errors are reported here, once (a trial whose imaging fails scores −inf instead).
     PupilSampling.parse(settings.psnr_sampling, path="tolerance.psnr_sampling")
+    camera = camera_of(model)
+    tile_grid(sensor_of(camera, settings.psnr_patch, settings.psnr_patch)[0], settings.psnr_patch,
+              option="tolerance.psnr_patch")
     with torch.no_grad():
         nominal = evaluate(job.setup, job.params(torch.zeros(1, len(job.tols), dtype=torch.float64)))
     lm_ref = tuple(float(v) for v in nominal["lm_offsets"][0]) if "lm_offsets" in nominal else None
-    psnr = PsnrSetup(camera_of(model), count=settings.psnr_count, patch=settings.psnr_patch, seed=settings.seed,
+    psnr = PsnrSetup(camera, count=settings.psnr_count, patch=settings.psnr_patch, seed=settings.seed,
                      sampling=settings.psnr_sampling, noise_sigma=settings.psnr_noise, restore=restore,
                      focus_reference=float(nominal["focus_shift"][0]), lm_reference=lm_ref,
                      lm_vars=job.setup.lm_vars)

@@ -100,5 +100,9 @@ def test_defocus_lowers_psnr_and_errors() -> None:
     assert rows[0]["value"] >= rows[-1]["value"]
     with pytest.raises(LensoptError, match="tolerance.metric"):
         make_job(model, _with(settings, items=[{"kind": "decenter_y", "limit": 0.01}]))
+    with pytest.raises(LensoptError, match="tolerance.psnr_patch"):  # larger than the 4000 × 3000 sensor
+        make_job(model, _with(settings, psnr_patch=4096))
+    with pytest.raises(LensoptError, match="tolerance.psnr_sampling"):
+        make_job(model, _with(settings, psnr_sampling="rings:x"))
     with pytest.raises(LensoptError, match="--irm"):
         make_job(model, _with(settings, metric="esr"), restore=lambda c, i: c)
