@@ -102,7 +102,7 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
                                   "focus_minus_mm": r.focus_minus, "focus_plus_mm": r.focus_plus,
                                   "inverse": r.inverse, "failed_rays": r.failed_rays} for r in rows]
         report["inverse_target"] = target
-        report["rss"] = rss_prediction(rows, job.tols, m0)
+        report["rss"] = rss_prediction(rows, job.tols, m0, higher_is_better=HIGHER_IS_BETTER[job.metric])
     if settings.trials > 0:
         start = time.perf_counter()
         mc = monte_carlo(job, settings.trials, settings.seed, scheduler=scheduler, workers=workers)
@@ -187,7 +187,8 @@ def _render(console: Any, r: dict[str, Any], top: int = 15) -> None:
                       f"{s['focus_minus_mm'] * 1e3:+.1f}/{s['focus_plus_mm'] * 1e3:+.1f}")
         console.print(t)
         rss = r["rss"]
-        console.print(f"RSS prediction: mean {rss['mean']:.4f}, std {rss['std']:.4f}, 90 % ≤ {rss['p90']:.4f}; "
+        at = "≥" if r["higher_is_better"] else "≤"
+        console.print(f"RSS prediction: mean {rss['mean']:.4f}, std {rss['std']:.4f}, 90 % {at} {rss['p90']:.4f}; "
                       f"classical RSS {rss['rss_worst']:.4f}")
     if "monte_carlo" in r:
         mc = r["monte_carlo"]

@@ -248,11 +248,14 @@ def moments(distribution: str, limit: float) -> tuple[float, float]:
     return sigma**2 * (1 - 2 * c * phi / z), sigma**4 * (3 - 2 * (c**3 + 3 * c) * phi / z)
 
 
-def rss_prediction(rows: list[SensitivityRow], tols: tuple[Tolerance, ...], m0: float) -> dict[str, float]:
+def rss_prediction(rows: list[SensitivityRow], tols: tuple[Tolerance, ...], m0: float, *,
+                   higher_is_better: bool = False) -> dict[str, float]:
     """Predicted distribution of the metric from the sensitivities (independent errors).
 
     Statistical: with Δ_i(x) = b_i x + q_i x², mean = m0 + Σ q_i E[x²], variance =
-    Σ b_i² E[x²] + q_i² (E[x⁴] − E[x²]²). Classical RSS: m0 + sqrt(Σ max(|Δ−|, |Δ+|)²).
+    Σ b_i² E[x²] + q_i² (E[x⁴] − E[x²]²). Classical RSS: m0 + sqrt(Σ max(|Δ−|, |Δ+|)²) (m0 − … when
+    higher is better). ``p50`` … ``p99``: the value that that fraction of lenses meets under a normal
+    law (at most it; at least it when higher is better, as the yield table).
     """
     by_name = {t.name: t for t in tols}
     mean, var, rss = m0, 0.0, 0.0
@@ -262,8 +265,9 @@ def rss_prediction(rows: list[SensitivityRow], tols: tuple[Tolerance, ...], m0: 
         var += r.linear**2 * e2 + r.quadratic**2 * (e4 - e2 * e2)
         rss += r.worst**2
     std = math.sqrt(max(var, 0.0))
-    return {"nominal": m0, "mean": mean, "std": std, "rss_worst": m0 + math.sqrt(rss),
-            **{f"p{int(p * 100)}": mean + _z(p) * std for p in LEVELS}}
+    sign = -1.0 if higher_is_better else 1.0
+    return {"nominal": m0, "mean": mean, "std": std, "rss_worst": m0 + sign * math.sqrt(rss),
+            **{f"p{int(p * 100)}": mean + sign * _z(p) * std for p in LEVELS}}
 
 
 def _z(p: float) -> float:

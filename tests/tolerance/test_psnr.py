@@ -106,3 +106,19 @@ def test_defocus_lowers_psnr_and_errors() -> None:
         make_job(model, _with(settings, psnr_sampling="rings:x"))
     with pytest.raises(LensoptError, match="--irm"):
         make_job(model, _with(settings, metric="esr"), restore=lambda c, i: c)
+
+
+def test_rss_prediction_turns_around_for_higher_is_better() -> None:
+    from lensopt.tolerance.model import Tolerance
+    from lensopt.tolerance.run import SensitivityRow, rss_prediction
+
+    # One uniform tolerance on [−1, 1] with Δ(x) = 0.5 x: σ = 0.5 / √3; worst |Δ| = 0.5.
+    row = SensitivityRow("t", "thickness", 1.0, -0.5, 0.5, 0.0, 0.0, 0.5, 0.0, 1.0, 0)
+    tols = (Tolerance("thickness", 0, 1.0, "uniform", "t"),)
+    z90 = 1.2815515655446004  # Φ⁻¹(0.9)
+    low = rss_prediction([row], tols, 10.0)
+    high = rss_prediction([row], tols, 10.0, higher_is_better=True)
+    assert low["std"] == pytest.approx(0.5 / 3**0.5) and high["std"] == low["std"]
+    assert low["p90"] == pytest.approx(10.0 + z90 * 0.5 / 3**0.5)
+    assert high["p90"] == pytest.approx(10.0 - z90 * 0.5 / 3**0.5)
+    assert (low["rss_worst"], high["rss_worst"]) == pytest.approx((10.5, 9.5))
