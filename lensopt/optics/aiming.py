@@ -9,10 +9,11 @@ lens parameters at convergence (implicit function theorem), as for the asphere i
 Decentered and tilted lenses (``lens.placement``) and two-dimensional fields: the stop centre is the
 stop surface's own vertex (its frame, ``optics.placement``), hits on the stop are measured in that
 frame, and ``chief`` aiming solves for a two-dimensional offset (δ_x, δ_y) by 2 × 2 Newton steps on
-the placed lens. ``full`` aiming of a placed lens aims the meridional rays in y and the lateral ray in
-radius about the stop centre, on the placed lens, but keeps the pupil ellipse centred in x (no x
-offset): exact for placements that keep the y–z plane a plane of symmetry (decenters in y, tilts
-about x), approximate otherwise.
+the placed lens. ``full`` aiming of a placed lens centres the pupil ellipse on the chief ray's x
+offset and aims the meridional rays in y and the lateral (+x) ray in radius about the stop centre,
+on the placed lens: exact when the y–z plane through the chief ray stays a plane of symmetry (e.g.
+decenters in y, tilts about x, a decentered front stop), approximate otherwise (the −x side of the
+ellipse mirrors the +x side). The stop radius r is that of the centred lens.
 """
 
 from __future__ import annotations
@@ -220,7 +221,9 @@ class PupilAim:
 
 def stop_radius(lens: Lens, system: System, *, epd: Tensor, entrance_pupil_z: Tensor) -> Tensor:
     """() height on the stop of the real on-axis marginal ray (pupil (0, 1), reference wavelength), mm;
-    the paraxial marginal height when that ray fails."""
+    the paraxial marginal height when that ray fails. A placed lens's stop keeps its size: the radius is
+    that of the centred lens (a decentered stop would otherwise shrink by its decenter)."""
+    lens = dataclasses.replace(lens, placement=None)
     ref = system.reference
     pupil = torch.zeros(1, lens.wavelength_um.shape[0], 1, 2, dtype=lens.dtype, device=lens.device)
     pupil[..., 1] = 1.0
@@ -274,18 +277,21 @@ def aim_full(
     if chief is None:
         chief = aim_chief(lens, system, tan_field, epd=epd, entrance_pupil_z=entrance_pupil_z)
     detached = _detach_lens(lens)
-    det_args = (detached, tan_field.detach(), epd.detach(), entrance_pupil_z.detach())
-    att_args = (lens, tan_field, epd, entrance_pupil_z)
+    # A placed lens: every ray is launched beside the chief ray's x offset (the ellipse is centred on it).
+    x_off = chief.offset_x
+    det_args = (detached, tan_field.detach(), epd.detach(), entrance_pupil_z.detach(),
+                None if x_off is None else x_off.detach())
+    att_args = (lens, tan_field, epd, entrance_pupil_z, x_off)
     radius = stop_radius(lens, system, epd=epd, entrance_pupil_z=entrance_pupil_z)
     r_det = radius.detach()
 
     def stop_hits(u: Tensor, y0: Tensor, args: tuple) -> tuple[Tensor, Tensor]:
         """u: (F, W, 3) = (y_lo, y_hi, x_l), y0: (F, W) launch height of the lateral ray → stop
         coordinates (y, y, ρ) of the three rays and their validity, (F, W, 3)."""
-        lens_, tan_, epd_, ep_z = args
-        zero = torch.zeros_like(y0)
+        lens_, tan_, epd_, ep_z, x0 = args
+        zero = torch.zeros_like(y0) if x0 is None else x0
         pupil = torch.stack([torch.stack([zero, u[..., 0]], -1), torch.stack([zero, u[..., 1]], -1),
-                             torch.stack([u[..., 2], y0], -1)], -2)
+                             torch.stack([u[..., 2] + zero, y0], -1)], -2)
         x, y, hit = stop_hit(lens_, launch(lens_, system, pupil, tan_, epd=epd_, entrance_pupil_z=ep_z))
         rho = torch.sqrt((x[..., 2] ** 2 + y[..., 2] ** 2).clamp_min(torch.finfo(u.dtype).tiny))
         return torch.stack([y[..., 0], y[..., 1], rho], -1), hit.valid
@@ -348,7 +354,8 @@ def aim_full(
             inside = held & (sign[:2] * res_fin[..., :2] <= eps_)
             res_fin = torch.cat([torch.where(inside, torch.zeros_like(inside, dtype=res_fin.dtype),
                                              res_fin[..., :2]), res_fin[..., 2:]], -1)
-        pupil = torch.stack([torch.zeros_like(y_c), chief.offset.detach()], -1).unsqueeze(-2)
+        px = torch.zeros_like(y_c) if det_args[4] is None else det_args[4]
+        pupil = torch.stack([px, chief.offset.detach()], -1).unsqueeze(-2)
         _, chief_y, hit = stop_hit(detached, launch(detached, system, pupil, det_args[1], epd=det_args[2],
                                                     entrance_pupil_z=det_args[3]))
         chief_ok = hit.valid[..., 0]

@@ -199,7 +199,7 @@ def trace_bundle(
                             aim_steps=system.aim_steps if aim_steps is None else aim_steps, tan_field_x=tan_x)
     if shape.factors is not None:
         pupil = apply_vignetting(pupil, shape.factors)
-    if shape.chief is not None and shape.chief.offset_x is not None and shape.full is None:
+    if shape.chief is not None and shape.chief.offset_x is not None:
         # Placed lenses and 2-D fields: the chief-aimed pupil moves in x too (``aiming``).
         shift = torch.stack([shape.chief.offset_x, torch.zeros_like(shape.chief.offset_x)], -1)
         pupil = pupil + shift[:, :, None]

@@ -135,3 +135,24 @@ def test_cooke_tilted_element_aim_matches_brute_force() -> None:
                      rel_field=torch.tensor([0.0, 1.0], dtype=torch.float64))
     assert torch.allclose(b.pupil[:, :, 0, 0], aim.offset_x, atol=1e-15)
     assert torch.allclose(b.pupil[:, :, 0, 1], aim.offset, atol=1e-15)
+
+
+def test_cmount_stop_decenter_full_aim_closed_form() -> None:
+    """``full`` aiming of the decentered front stop: the ellipse is the unit disc moved by (dx, dy)/(EPD/2)
+    (V_i = dy/R, V_s = −dy/R, V_l = 0, x offset dx/R) for every field and wavelength, and the marginal
+    rays of the launched bundle meet the stop edge r = R (the stop keeps its size)."""
+    dx, dy = 0.03, 0.05
+    model, lens = _cmount_stop_decentered(dx, dy)
+    system = model.system
+    radius = float(first_order(lens, system).epd) / 2
+    pupil = torch.tensor([[0.0, -1.0], [0.0, 1.0], [1.0, 0.0], [-1.0, 0.0], [0.6, 0.8]], dtype=torch.float64)
+    b = trace_bundle(lens, system, pupil, aim="full", record=True)
+    assert b.pupil_aim is not None and b.pupil_aim.converged.all()
+    assert float(b.pupil_aim.stop_radius_mm) == pytest.approx(radius, abs=1e-12)
+    want = torch.tensor([dy / radius, -dy / radius, 0.0], dtype=torch.float64)
+    assert torch.allclose(b.vignetting, want.expand_as(b.vignetting), rtol=0, atol=1e-12)
+    assert torch.allclose(b.pupil_aim.chief.offset_x, torch.full_like(b.pupil_aim.chief.offset_x, dx / radius),
+                          rtol=0, atol=1e-14)
+    hit = b.result.hits[0].pos  # the stop (surface 0), global; its frame is the global frame moved by (dx, dy)
+    rho = torch.sqrt((hit[..., 0] - dx) ** 2 + (hit[..., 1] - dy) ** 2)
+    assert torch.allclose(rho, torch.full_like(rho, radius), rtol=0, atol=1e-12)
