@@ -278,7 +278,9 @@ def _distortion_2d(setup: EvalSetup, lens: Lens, centroid: Tensor, ep_z: Tensor)
     radius = torch.linalg.vector_norm(setup.field_xy.to(torch.float64), dim=-1)
     outer = [i for i, r in enumerate(radius.tolist()) if r >= float(radius.max()) - 1e-12]
     p2 = (p[outer] ** 2).sum(-1)
-    d = 100.0 * ((centroid[outer] * p[outer]).sum(-1) - p2) / p2
+    off_axis = p2 > 0  # only the axis given: no distortion to speak of (0, not NaN)
+    safe = torch.where(off_axis, p2, 1.0)
+    d = torch.where(off_axis, 100.0 * ((centroid[outer] * p[outer]).sum(-1) - p2) / safe, 0.0)
     return torch.gather(d, 0, torch.argmax(d.abs(), dim=0, keepdim=True))[0]
 
 

@@ -136,6 +136,9 @@ def test_fields_setting_is_checked_and_monte_carlo_runs() -> None:
                                                  {"kind": "tilt_x", "limit": 2.0}], compensator="focus"))
     mc = monte_carlo(job, 6, 0)
     assert mc.metrics["rms"].shape == (6, 9) and np.isfinite(mc.scalar).all()
+    axis = make_job(model, _settings([[0.0, 0.0]], items=[{"kind": "decenter_y", "limit": 0.05}]))
+    out = evaluate(axis.setup, axis.params(torch.tensor([[0.0] * len(axis.tols)], dtype=torch.float64)))
+    assert float(out["distortion"][0]) == 0.0 and torch.isfinite(out["esr"]).all()
 
 
 def test_cli_fields_option() -> None:
