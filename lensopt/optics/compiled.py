@@ -47,7 +47,7 @@ logger = logging.getLogger(__name__)
 
 _LENS_TENSORS = ("curvature", "conic", "asphere", "phase", "thickness", "index", "wavelength_um", "semi_diameter")
 
-_Key = tuple[tuple[SurfaceShape, ...], int, int | None, bool, int, torch.dtype, torch.device]
+_Key = tuple[tuple[SurfaceShape, ...], int, int | None, bool, int, torch.dtype, torch.device, int]
 _EAGER = "eager"
 _cache: dict[_Key, Callable[..., Any] | str] = {}
 _MAX_FUSION_SIZE = 4096
@@ -86,7 +86,10 @@ def compiled_trace(
         # mode runs the eager trace, without marking the structure as failed. The optimizer's
         # compiled Jacobian (``optim.compiled_jacobian``) compiles the jvp itself instead.
         return trace(lens, rays, upto=upto, record=record, newton_iterations=newton_iterations)
-    key: _Key = (lens.shapes, lens.stop, upto, record, newton_iterations, lens.dtype, lens.device)
+    # The number of wavelengths is part of the structure: the trace looks the index table up by
+    # selects over the wavelengths when it is compiled (``trace._per_ray``).
+    key: _Key = (lens.shapes, lens.stop, upto, record, newton_iterations, lens.dtype, lens.device,
+                 lens.index.shape[-1])
     fn = _cache.get(key)
     if fn is None:
         fn = _cache[key] = _make_compiled(key)

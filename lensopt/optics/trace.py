@@ -8,6 +8,7 @@ ray is well behaved and keeps being traced, as in the seed.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from enum import IntEnum
@@ -134,19 +135,28 @@ def trace(
         A ``RayTrace`` with shapes (*B, …) of the broadcast ray batch.
     """
     pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
+    if _chunked(lens, rays, pos):
+        return _trace_in_chunks(lens, rays, pos, dir, upto=upto, record=record, newton_iterations=newton_iterations)
+    compiling = torch.compiler.is_compiling()
     batch = pos.shape[:-1]
-    # Running mask + first failure code, kept in the rays' float dtype so that a fused kernel
-    # vectorizes every operation alike (integer lanes cost extra conversions); int64 on return.
-    ok = torch.ones(batch, dtype=torch.bool, device=pos.device)
+    # First failure code, kept in the rays' float dtype so that a fused kernel vectorizes every
+    # operation alike (integer and bool lanes cost mask conversions); int64 on return. The running
+    # mask of rays still alive is ``status == 0`` (recomputed, not carried as a bool tensor).
     status = torch.zeros(batch, dtype=pos.dtype, device=pos.device)
+    ok = status == _OK
     failed_at = torch.full(batch, -1.0, dtype=pos.dtype, device=pos.device) if record else None
     backtrack = torch.zeros(batch, dtype=torch.bool, device=pos.device)
     vertex = lens.vertex_z()
     # Decentered/tilted surfaces: rays go into each surface's frame and back (optics.placement);
     # a lens on its axis skips every transform (the symmetric fast path).
     frames = None if lens.placement is None else surface_frames(lens.thickness, lens.placement)
-    lam_mm = lens.wavelength_um[rays.wavelength] * 1e-3
+    if any(shape.diffractive for shape in lens.shapes):
+        lam_mm = lens.wavelength_um[rays.wavelength] * 1e-3
     inv_index = 1.0 / lens.index  # (S+1, W): one division per medium, not per ray and surface
+    # Per-wavelength tables: a gather per surface in eager torch; inside torch.compile a short chain
+    # of selects on the wavelength index as a float (Inductor turns a gather into scalar loads and
+    # bounds checks inside the fused loop; the selects vectorize). Same values either way.
+    wl_select = rays.wavelength.to(pos.dtype) if compiling and lens.index.shape[-1] <= _MAX_SELECT else None
     # Components: fused kernels vectorize over rays only when x, y, z are separate tensors.
     x, y, z = pos.unbind(-1)
     dx, dy, dz = dir.unbind(-1)
@@ -196,8 +206,8 @@ def trace(
             # m λ/(2π) ∇φ with ∇φ = 2 dφ/du (x, y, 0): finite at r = 0 (S16–S17).
             g = shape.order * lam_mm / math.pi * phase_slope(u, lens.phase[s])
             grating = (g * hx, g * hy)
-        n1 = lens.index[s][rays.wavelength]
-        inv_n2 = inv_index[s + 1][rays.wavelength]
+        n1 = _per_ray(lens.index[s], rays.wavelength, wl_select)
+        inv_n2 = _per_ray(inv_index[s + 1], rays.wavelength, wl_select)
         d_out, cos2_in, cos2_out, tir = bend_xyz((dx, dy, dz), normal, n1, inv_n2, grating)
         status, ok = _fail(status, ok, tir, Status.TIR)
         failed_at = _first_failure(failed_at, ok, s)
@@ -233,6 +243,47 @@ def trace(
                     failed_at=None if failed_at is None else failed_at.long())
 
 
+CHUNK_RAYS = 1 << 16
+"""Rays per chunk of the eager trace when nothing needs gradients: every eager op writes a full
+array, and on arrays of ≈ 0.5 MB (64 Ki rays, float64) that stays in the CPU caches instead of
+main memory (1.5–2× faster at 1e6 rays, benchmarks/RESULTS.md issue 14; the same numbers bit for bit)."""
+
+
+def _chunked(lens: Lens, rays: Rays, pos: Tensor) -> bool:
+    """Whether ``trace`` should run in chunks of ``CHUNK_RAYS``: many rays, eager, and no autograd,
+    forward-mode or functorch transform watching (the optimizer's paths stay one call)."""
+    if pos.numel() < 6 * CHUNK_RAYS or torch.compiler.is_compiling():
+        return False
+    from torch._C._functorch import is_functorch_wrapped_tensor
+    from torch.autograd.forward_ad import unpack_dual
+
+    tensors = [pos, rays.dir, rays.wavelength]
+    for holder in (lens, lens.placement):
+        if holder is not None:
+            tensors += [v for f in dataclasses.fields(holder) if isinstance(v := getattr(holder, f.name), Tensor)]
+    grad = torch.is_grad_enabled()
+    return not any((grad and t.requires_grad) or is_functorch_wrapped_tensor(t) or unpack_dual(t).tangent is not None
+                   for t in tensors)
+
+
+def _trace_in_chunks(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, **kwargs) -> RayTrace:
+    """``trace`` over consecutive chunks of the flattened ray batch, concatenated (same values)."""
+    batch = pos.shape[:-1]
+    pos, dir = pos.reshape(-1, 3), dir.reshape(-1, 3)
+    wavelength = torch.broadcast_to(rays.wavelength, batch).reshape(-1)
+    parts = [trace(lens, Rays(pos[i:i + CHUNK_RAYS], dir[i:i + CHUNK_RAYS], wavelength[i:i + CHUNK_RAYS]), **kwargs)
+             for i in range(0, pos.shape[0], CHUNK_RAYS)]
+
+    def cat(values: list[Tensor]) -> Tensor:
+        return torch.cat(values).reshape(batch + values[0].shape[1:])
+
+    hits = tuple(SurfaceHit(*(cat([getattr(p.hits[i], f.name) for p in parts]) for f in dataclasses.fields(SurfaceHit)))
+                 for i in range(len(parts[0].hits)))
+    return RayTrace(pos=cat([p.pos for p in parts]), dir=cat([p.dir for p in parts]),
+                    status=cat([p.status for p in parts]), backtrack=cat([p.backtrack for p in parts]), hits=hits,
+                    failed_at=None if parts[0].failed_at is None else cat([p.failed_at for p in parts]))
+
+
 def _first_failure(failed_at: Tensor | None, ok: Tensor, surface: int) -> Tensor | None:
     """Record ``surface`` for rays that have failed by now and had no failure surface yet (when
     recording; the plain trace skips the bookkeeping)."""
@@ -242,8 +293,24 @@ def _first_failure(failed_at: Tensor | None, ok: Tensor, surface: int) -> Tensor
 
 
 def _fail(status: Tensor, ok: Tensor, failed: Tensor, reason: Status) -> tuple[Tensor, Tensor]:
-    """Record ``reason`` for rays that fail now and had not failed before; update the running mask."""
-    return torch.where(ok & failed, _CODE[reason], status), ok & ~failed
+    """Record ``reason`` for rays that fail now and had not failed before; the new running mask."""
+    status = torch.where(ok & failed, _CODE[reason], status)
+    return status, status == _OK
+
+
+_MAX_SELECT = 8
+"""Largest number of wavelengths looked up by selects rather than a gather inside torch.compile."""
+
+
+def _per_ray(row: Tensor, wavelength: Tensor, wl_select: Tensor | None) -> Tensor:
+    """``row[wavelength]`` (row: (W,) per-wavelength values); with ``wl_select`` (the wavelength
+    index as a float tensor) by ``torch.where`` selects, which give the same values."""
+    if wl_select is None:
+        return row[wavelength]
+    out = torch.where(wl_select == 0.0, row[0], row[-1])
+    for j in range(1, row.shape[0] - 1):
+        out = torch.where(wl_select == float(j), row[j], out)
+    return out
 
 
 _CODE = {reason: float(reason.value) for reason in Status}
