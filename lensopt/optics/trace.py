@@ -17,7 +17,7 @@ import torch
 from torch import Tensor
 
 from lensopt.optics.interact import bend_xyz
-from lensopt.optics.intersect import NEWTON_ITERATIONS, asphere_xyz, quadric_xyz
+from lensopt.optics.intersect import NEWTON_ITERATIONS, asphere_xyz, quadric_flag_xyz
 from lensopt.optics.lens import Lens
 from lensopt.optics.placement import surface_frames, to_global, to_local
 from lensopt.optics.surfaces import conic_normal_xyz, normal_xyz, phase_slope, sag
@@ -139,13 +139,14 @@ def trace(
         return _trace_in_chunks(lens, rays, pos, dir, upto=upto, record=record, newton_iterations=newton_iterations)
     compiling = torch.compiler.is_compiling()
     batch = pos.shape[:-1]
-    # First failure code, kept in the rays' float dtype so that a fused kernel vectorizes every
-    # operation alike (integer and bool lanes cost mask conversions); int64 on return. The running
-    # mask of rays still alive is ``status == 0`` (recomputed, not carried as a bool tensor).
+    # First failure code and the backtracking flag, kept in the rays' float dtype (int64 and bool
+    # on return), and every mask used only as the condition of a select, never combined by boolean
+    # algebra: inside torch.compile each boolean &, |, ~ costs mask-format conversions lane by lane
+    # (more than the arithmetic around it). The running mask of live rays is ``status == 0``.
     status = torch.zeros(batch, dtype=pos.dtype, device=pos.device)
     ok = status == _OK
     failed_at = torch.full(batch, -1.0, dtype=pos.dtype, device=pos.device) if record else None
-    backtrack = torch.zeros(batch, dtype=torch.bool, device=pos.device)
+    backtrack = torch.zeros(batch, dtype=pos.dtype, device=pos.device)
     vertex = lens.vertex_z()
     # Decentered/tilted surfaces: rays go into each surface's frame and back (optics.placement);
     # a lens on its axis skips every transform (the symmetric fast path).
@@ -177,10 +178,10 @@ def trace(
             status, ok = _fail(status, ok, ~defined, Status.MISSED)
             status, ok = _fail(status, ok, ~converged, Status.NEWTON)
         else:
-            t, hit = quadric_xyz((x, y, lz), (dx, dy, dz), c, k)
-            status, ok = _fail(status, ok, ~hit, Status.MISSED)
+            t, hit = quadric_flag_xyz((x, y, lz), (dx, dy, dz), c, k)
+            status, ok = _fail(status, ok, hit == 0, Status.MISSED)
         if s > 0:
-            backtrack = backtrack | ((t < 0) & ok)
+            backtrack = _flag(backtrack, ok, t < 0)
         hx, hy, hz = x + t * dx, y + t * dy, lz + t * dz
         u = hx * hx + hy * hy
         if shape.clip:
@@ -236,10 +237,10 @@ def trace(
         t = (image_z - z) / torch.where(parallel, 1.0, dz)
         status, ok = _fail(status, ok, parallel, Status.MISSED)
         failed_at = _first_failure(failed_at, ok, lens.num_surfaces)
-        backtrack = backtrack | ((t < 0) & ok)
+        backtrack = _flag(backtrack, ok, t < 0)
         x, y, z = torch.where(ok, x + t * dx, x), torch.where(ok, y + t * dy, y), torch.where(ok, z + t * dz, z)
     return RayTrace(pos=torch.stack([x, y, z], -1), dir=torch.stack([dx, dy, dz], -1), status=status.long(),
-                    backtrack=backtrack, hits=tuple(hits),
+                    backtrack=backtrack > 0, hits=tuple(hits),
                     failed_at=None if failed_at is None else failed_at.long())
 
 
@@ -289,13 +290,19 @@ def _first_failure(failed_at: Tensor | None, ok: Tensor, surface: int) -> Tensor
     recording; the plain trace skips the bookkeeping)."""
     if failed_at is None:
         return None
-    return torch.where(~ok & (failed_at < 0), float(surface), failed_at)
+    return torch.where(ok, failed_at, torch.where(failed_at < 0, float(surface), failed_at))
 
 
 def _fail(status: Tensor, ok: Tensor, failed: Tensor, reason: Status) -> tuple[Tensor, Tensor]:
-    """Record ``reason`` for rays that fail now and had not failed before; the new running mask."""
-    status = torch.where(ok & failed, _CODE[reason], status)
+    """Record ``reason`` for rays that fail now and had not failed before (``ok``: the live rays);
+    the new status and running mask."""
+    status = torch.where(failed, torch.where(ok, _CODE[reason], status), status)
     return status, status == _OK
+
+
+def _flag(flag: Tensor, ok: Tensor, now: Tensor) -> Tensor:
+    """The float flag (0/1) set where ``now`` holds for a live ray (``ok``), else kept."""
+    return torch.where(now, torch.where(ok, 1.0, flag), flag)
 
 
 _MAX_SELECT = 8
