@@ -59,13 +59,14 @@ def quadric_xyz(p: Vec3, d: Vec3, c: Tensor, k: Tensor) -> tuple[Tensor, Tensor]
     return t, hit > 0
 
 
-def quadric_flag_xyz(p: Vec3, d: Vec3, c: Tensor, k: Tensor) -> tuple[Tensor, Tensor]:
+def quadric_flag_xyz(p: Vec3, d: Vec3, c: Tensor, k: Tensor, *, shortcuts: bool = False) -> tuple[Tensor, Tensor]:
     """``quadric_xyz`` with ``hit`` as a float flag (1.0 hit, 0.0 missed) in the rays' dtype.
 
     The masks are combined by selects on comparisons, never by boolean algebra: inside a
     ``torch.compile``-d trace, Inductor's C++ backend converts every boolean ``&``/``|``/``~`` lane by
     lane between mask formats, which cost more than the arithmetic (benchmarks/RESULTS.md, issue 14).
-    The values are those of the boolean formulation.
+    The values are those of the boolean formulation. ``shortcuts`` (eager only, no transform
+    watching): skip the far root when every ray meets the sag branch with the near one (same values).
     """
     rho = 1.0 + k
     px, py, pz = p
@@ -86,6 +87,8 @@ def quadric_flag_xyz(p: Vec3, d: Vec3, c: Tensor, k: Tensor) -> tuple[Tensor, Te
     # The sag formula's branch satisfies (1 + κ) c z ≤ 1; the far side of a sphere/ellipsoid and the
     # second sheet of a hyperboloid do not.
     on_sheet = rho * c * (pz + t * dz) <= 1.0
+    if shortcuts and bool(on_sheet.all()):
+        return torch.where(hit > 0, t0 + t, 0.0), hit
     # The other root, q / a: still needed after the transfer when the ray crosses the vertex plane
     # beyond the centre of curvature (b < 0 going forward); then C / q is the far side of the
     # sphere and the sag-branch crossing is q / a.

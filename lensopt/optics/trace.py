@@ -137,6 +137,15 @@ def trace(
     pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
     if _chunked(lens, rays, pos):
         return _trace_in_chunks(lens, rays, pos, dir, upto=upto, record=record, newton_iterations=newton_iterations)
+    return _trace(lens, rays, pos, dir, upto, record, newton_iterations, shortcuts=False)
+
+
+def _trace(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, upto: int | None, record: bool, newton_iterations: int,
+           *, shortcuts: bool) -> RayTrace:
+    """The trace of ``trace``. ``shortcuts`` (eager, nothing watching: the chunked path) skips work
+    that a look at the values shows cannot change them (a select whose condition holds for every
+    ray, the far root of a quadric that no ray needs): the same numbers, fewer full-array passes.
+    Never inside torch.compile, vmap or forward mode, where a branch on values is not allowed."""
     compiling = torch.compiler.is_compiling()
     batch = pos.shape[:-1]
     # First failure code and the backtracking flag, kept in the rays' float dtype (int64 and bool
@@ -178,7 +187,7 @@ def trace(
             status, ok = _fail(status, ok, ~defined, Status.MISSED)
             status, ok = _fail(status, ok, ~converged, Status.NEWTON)
         else:
-            t, hit = quadric_flag_xyz((x, y, lz), (dx, dy, dz), c, k)
+            t, hit = quadric_flag_xyz((x, y, lz), (dx, dy, dz), c, k, shortcuts=shortcuts)
             status, ok = _fail(status, ok, hit == 0, Status.MISSED)
         if s > 0:
             backtrack = _flag(backtrack, ok, t < 0)
@@ -218,9 +227,13 @@ def trace(
                 o, r = frames.origin[s], frames.rotation[s]
                 rec = (to_global(rec[0], o, r),) + tuple(to_global(v, None, r) for v in rec[1:])
             hits.append(SurfaceHit(*(torch.stack(v, -1) for v in rec), t, cos2_in, cos2_out))
-        x, y, z = torch.where(ok, hx, x), torch.where(ok, hy, y), torch.where(ok, hz, z)
-        # Failed rays keep their last valid position and continue as placeholders along the axis.
-        dx, dy, dz = torch.where(ok, d_out[0], 0.0), torch.where(ok, d_out[1], 0.0), torch.where(ok, d_out[2], 1.0)
+        if shortcuts and bool(ok.all()):
+            (x, y, z), (dx, dy, dz) = (hx, hy, hz), d_out
+        else:
+            x, y, z = torch.where(ok, hx, x), torch.where(ok, hy, y), torch.where(ok, hz, z)
+            # Failed rays keep their last valid position and continue as placeholders along the axis.
+            dx, dy, dz = (torch.where(ok, d_out[0], 0.0), torch.where(ok, d_out[1], 0.0),
+                          torch.where(ok, d_out[2], 1.0))
         if frames is not None:
             x, y, z = to_global((x, y, z), frames.origin[s], frames.rotation[s])
             dx, dy, dz = to_global((dx, dy, dz), None, frames.rotation[s])
@@ -251,9 +264,10 @@ main memory (1.5–2× faster at 1e6 rays, benchmarks/RESULTS.md issue 14; the s
 
 
 def _chunked(lens: Lens, rays: Rays, pos: Tensor) -> bool:
-    """Whether ``trace`` should run in chunks of ``CHUNK_RAYS``: many rays, eager, and no autograd,
-    forward-mode or functorch transform watching (the optimizer's paths stay one call)."""
-    if pos.numel() < 6 * CHUNK_RAYS or torch.compiler.is_compiling():
+    """Whether ``trace`` should run in chunks of ``CHUNK_RAYS``: many rays on the CPU (a GPU has no
+    such cache effect, and each chunk would cost kernel launches), eager, and no autograd, forward-mode
+    or functorch transform watching (the optimizer's paths stay one call)."""
+    if pos.numel() < 6 * CHUNK_RAYS or pos.device.type != "cpu" or torch.compiler.is_compiling():
         return False
     from torch._C._functorch import is_functorch_wrapped_tensor
     from torch.autograd.forward_ad import unpack_dual
@@ -272,7 +286,9 @@ def _trace_in_chunks(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, **kwargs)
     batch = pos.shape[:-1]
     pos, dir = pos.reshape(-1, 3), dir.reshape(-1, 3)
     wavelength = torch.broadcast_to(rays.wavelength, batch).reshape(-1)
-    parts = [trace(lens, Rays(pos[i:i + CHUNK_RAYS], dir[i:i + CHUNK_RAYS], wavelength[i:i + CHUNK_RAYS]), **kwargs)
+    parts = [_trace(lens, Rays(pos[i:i + CHUNK_RAYS], dir[i:i + CHUNK_RAYS], wavelength[i:i + CHUNK_RAYS]),
+                    pos[i:i + CHUNK_RAYS], dir[i:i + CHUNK_RAYS], kwargs["upto"], kwargs["record"],
+                    kwargs["newton_iterations"], shortcuts=True)
              for i in range(0, pos.shape[0], CHUNK_RAYS)]
 
     def cat(values: list[Tensor]) -> Tensor:
