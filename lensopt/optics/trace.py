@@ -184,17 +184,17 @@ def _trace(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, upto: int | None, r
         if shape.kind == "asphere":
             t, defined, converged = asphere_xyz((x, y, lz), (dx, dy, dz), c, k, lens.asphere[s],
                                                 iterations=newton_iterations)
-            status, ok = _fail(status, ok, ~defined, Status.MISSED)
-            status, ok = _fail(status, ok, ~converged, Status.NEWTON)
+            status, ok = _fail(status, ok, ~defined, Status.MISSED, shortcuts)
+            status, ok = _fail(status, ok, ~converged, Status.NEWTON, shortcuts)
         else:
             t, hit = quadric_flag_xyz((x, y, lz), (dx, dy, dz), c, k, shortcuts=shortcuts)
-            status, ok = _fail(status, ok, hit == 0, Status.MISSED)
+            status, ok = _fail(status, ok, hit == 0, Status.MISSED, shortcuts)
         if s > 0:
-            backtrack = _flag(backtrack, ok, t < 0)
+            backtrack = _flag(backtrack, ok, t < 0, shortcuts)
         hx, hy, hz = x + t * dx, y + t * dy, lz + t * dz
         u = hx * hx + hy * hy
         if shape.clip:
-            status, ok = _fail(status, ok, u > lens.semi_diameter[s] ** 2, Status.CLIPPED)
+            status, ok = _fail(status, ok, u > lens.semi_diameter[s] ** 2, Status.CLIPPED, shortcuts)
         failed_at = _first_failure(failed_at, ok, s)
         if shape.kind == "asphere":
             _, dz_du, _ = sag(u, c, k, lens.asphere[s])
@@ -219,7 +219,7 @@ def _trace(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, upto: int | None, r
         n1 = _per_ray(lens.index[s], rays.wavelength, wl_select)
         inv_n2 = _per_ray(inv_index[s + 1], rays.wavelength, wl_select)
         d_out, cos2_in, cos2_out, tir = bend_xyz((dx, dy, dz), normal, n1, inv_n2, grating)
-        status, ok = _fail(status, ok, tir, Status.TIR)
+        status, ok = _fail(status, ok, tir, Status.TIR, shortcuts)
         failed_at = _first_failure(failed_at, ok, s)
         if record:
             rec = ((hx, hy, hz), (dx, dy, dz), d_out, normal)
@@ -248,9 +248,9 @@ def _trace(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, upto: int | None, r
         eps = torch.finfo(dz.dtype).eps
         parallel = dz.abs() <= eps
         t = (image_z - z) / torch.where(parallel, 1.0, dz)
-        status, ok = _fail(status, ok, parallel, Status.MISSED)
+        status, ok = _fail(status, ok, parallel, Status.MISSED, shortcuts)
         failed_at = _first_failure(failed_at, ok, lens.num_surfaces)
-        backtrack = _flag(backtrack, ok, t < 0)
+        backtrack = _flag(backtrack, ok, t < 0, shortcuts)
         x, y, z = torch.where(ok, x + t * dx, x), torch.where(ok, y + t * dy, y), torch.where(ok, z + t * dz, z)
     return RayTrace(pos=torch.stack([x, y, z], -1), dir=torch.stack([dx, dy, dz], -1), status=status.long(),
                     backtrack=backtrack > 0, hits=tuple(hits),
@@ -309,15 +309,19 @@ def _first_failure(failed_at: Tensor | None, ok: Tensor, surface: int) -> Tensor
     return torch.where(ok, failed_at, torch.where(failed_at < 0, float(surface), failed_at))
 
 
-def _fail(status: Tensor, ok: Tensor, failed: Tensor, reason: Status) -> tuple[Tensor, Tensor]:
+def _fail(status: Tensor, ok: Tensor, failed: Tensor, reason: Status, shortcuts: bool) -> tuple[Tensor, Tensor]:
     """Record ``reason`` for rays that fail now and had not failed before (``ok``: the live rays);
-    the new status and running mask."""
+    the new status and running mask (unchanged, with ``shortcuts``, when no ray fails here)."""
+    if shortcuts and not bool(failed.any()):
+        return status, ok
     status = torch.where(failed, torch.where(ok, _CODE[reason], status), status)
     return status, status == _OK
 
 
-def _flag(flag: Tensor, ok: Tensor, now: Tensor) -> Tensor:
+def _flag(flag: Tensor, ok: Tensor, now: Tensor, shortcuts: bool) -> Tensor:
     """The float flag (0/1) set where ``now`` holds for a live ray (``ok``), else kept."""
+    if shortcuts and not bool(now.any()):
+        return flag
     return torch.where(now, torch.where(ok, 1.0, flag), flag)
 
 
