@@ -13,6 +13,11 @@ learning rates (the best is reported); LM with the Table S7 defaults.
 one-off capture + compile runs before the clock starts and is reported beside the curves. The
 "time to merit" table gives, for the merit the best Adam run reaches within the budget, how soon each
 run first reaches it, and LM's lead over that Adam run (its time / LM's time).
+
+The trace backend is pinned (``--backend``, default eager) for every run: under ``auto`` the residual
+function switches to the compiled trace once 10 M rays of a structure have been traced in the
+process, so a later run would pay a compile (minutes, and a backward graph for Adam) in the middle
+of its clock, and runs would not see the same residual function.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from pathlib import Path
 
 import torch
 
+from lensopt.optics.backend import set_backend
 from lensopt.optim import Problem
 from lensopt.optim.run import make_optimizer
 from lensopt.spec import load_spec
@@ -90,11 +96,14 @@ def main() -> None:
     ap.add_argument("--budget", type=float, default=180.0, help="wall seconds per optimizer run")
     ap.add_argument("--lrs", type=float, nargs="+", default=[1e-4, 1e-3, 1e-2])
     ap.add_argument("--jacobian", choices=["eager", "compiled"], default="eager", help="LM's Jacobian")
+    ap.add_argument("--backend", choices=["eager", "compiled", "auto"], default="eager",
+                    help="trace backend of the residual function, for every run")
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--plot", type=Path, default=None)
     args = ap.parse_args()
     load_before = os.getloadavg()
     p = problem(args.problem)
+    set_backend(args.backend)
     lm_name = "LM (Table S7)" + (", compiled Jacobian" if args.jacobian == "compiled" else "")
     runs = {}
     runs[lm_name], compile_s = run(p, "lm", args.budget, jacobian=args.jacobian)
@@ -128,7 +137,7 @@ def main() -> None:
         write_text_atomic(args.json, json.dumps({
             "problem": args.problem, "variables": p.num_variables, "residuals": p.size, "budget_s": args.budget,
             "loadavg_before": load_before, "loadavg_after": os.getloadavg(), "threads": torch.get_num_threads(),
-            "jacobian": args.jacobian, "jacobian_compile_s": compile_s, "best_adam": best_adam,
+            "jacobian": args.jacobian, "backend": args.backend, "jacobian_compile_s": compile_s, "best_adam": best_adam,
             "target_merit": target, "best_adam_reaches_s": t_adam, "lm_reaches_s": t_lm,
             "runs": {k: thin(v) for k, v in runs.items()}}) + "\n")
     if args.plot:
