@@ -18,17 +18,23 @@ Compilation / JIT warm-up is excluded from the timings and reported separately.
     .venv/bin/python benchmarks/trace_speed.py --rays 1e5,1e6 --repeats 7 --dtype float64,float32
 
 prints a ready-to-paste markdown section (table, agreement checks, profile, peak memory).
+
+``--before DIR`` adds the eager and compiled traces of another checkout's ``lensopt`` package (DIR is
+that checkout's root, e.g. ``git worktree add /tmp/before main``), imported under another name, so
+that a change to the trace is timed before and after in the same run.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import platform
 import statistics
 import subprocess
 import sys
 import time
+import types
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -112,10 +118,38 @@ class Peer:
         return np.stack([self.rays.x, self.rays.y], -1)
 
 
-def lensopt_runner(model, rays: Rays, dtype: torch.dtype, compiled: bool) -> Callable[[], object]:
+def import_before(root: Path) -> types.ModuleType:
+    """``root``/lensopt imported as the package ``lensopt_before`` (a renamed copy in a temp dir)."""
+    import importlib
+    import re
+    import shutil
+    import tempfile
+
+    dest = Path(tempfile.mkdtemp(prefix="lensopt_before_")) / "lensopt_before"
+    shutil.copytree(root / "lensopt", dest, ignore=shutil.ignore_patterns("__pycache__"))
+    for f in dest.rglob("*.py"):
+        text = re.sub(r"\b(from|import) lensopt\b", r"\1 lensopt_before", f.read_text())
+        f.write_text(re.sub(r"\blensopt\.", "lensopt_before.", text))
+    sys.path.insert(0, str(dest.parent))
+    return importlib.import_module("lensopt_before")
+
+
+def lensopt_runner(model, rays: Rays, dtype: torch.dtype, compiled: bool, before: Path | None = None
+                   ) -> Callable[[], object]:
     lens = model.lens.to(dtype)
     # Component-major storage, as optiland's RealRays keep x, y, z (and L, M, N) as separate arrays.
     r = component_major_rays(Rays(pos=rays.pos.to(dtype), dir=rays.dir.to(dtype), wavelength=rays.wavelength))
+    if before is not None:
+        import_before(before)
+        from lensopt_before.optics import compiled as old_compiled
+        from lensopt_before.optics import lens as old_lens
+        from lensopt_before.optics import trace as old_trace
+
+        lens = old_lens.Lens(**{f.name: getattr(lens, f.name) for f in dataclasses.fields(lens)})
+        r = old_trace.Rays(r.pos, r.dir, r.wavelength)
+        if compiled:
+            return lambda: old_compiled.compiled_trace(lens, r, fallback=False)
+        return lambda: old_trace.trace(lens, r)
     if compiled:
         return lambda: compiled_trace(lens, r, fallback=False)
     return lambda: trace(lens, r)
@@ -187,6 +221,9 @@ def measure(n: int, args: argparse.Namespace, notes: list[str]) -> list[str]:
     for mode in args.modes:
         for dt in args.dtypes:
             configs[f"lensopt {mode}|{dt}"] = (lensopt_runner(model, rays, DTYPES[dt], mode == "compiled"), None)
+            if args.before is not None:
+                configs[f"lensopt {mode}, before|{dt}"] = (
+                    lensopt_runner(model, rays, DTYPES[dt], mode == "compiled", args.before), None)
     if args.ceiling:
         configs["sketch (ceiling, not lensopt)|float64"] = (sketch_runner(model.lens, rays), None)
     # Warm-up (compilation, numba JIT) and agreement with the eager float64 trace.
@@ -238,6 +275,8 @@ def main() -> None:
                     help="skip the component-wise sketch (benchmarks/soa_sketch.py)")
     ap.add_argument("--no-profile", action="store_true", help="skip the profile and memory sections")
     ap.add_argument("--profile-rows", type=int, default=10)
+    ap.add_argument("--before", type=Path, default=None,
+                    help="root of another checkout: time its eager/compiled trace too (same run)")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.threads:
@@ -266,7 +305,7 @@ def main() -> None:
            "plane; *rays×surf* counts the 6 refracting surfaces.",
            "- Command: `.venv/bin/python benchmarks/trace_speed.py "
            f"--rays {args.rays} --repeats {args.repeats} --dtype {args.dtype} --modes {','.join(args.modes)}"
-           f"{threads}`"]
+           f"{threads}{' --before DIR' if args.before else ''}`"]
     table = ["| rays | tracer | dtype | median s | min–max s | M rays/s | M rays×surf/s | × optiland |",
              "|---:|---|---|---:|---:|---:|---:|---:|"]
     notes: list[str] = []

@@ -2,8 +2,9 @@
 
 Both give the same ``RayTrace`` (to ~1e-14 mm; tests hold them to 1e-12 mm). They differ in cost:
 
-- eager: no start-up, ≈ 0.5 µs per ray and surface loop in float64 on these 2-core machines;
-- compiled: 3–7× faster per ray, but the first call per lens *structure* (and per recorded/upto
+- eager: no start-up, ≈ 0.1–0.2 µs per ray and surface in float64 on these 2-core machines (large
+  batches run in cache-sized chunks, ``trace.CHUNK_RAYS``);
+- compiled: ≈ 9× faster per ray in float64, but the first call per lens *structure* (and per recorded/upto
   variant) in a process pays the compilation: 20–90 s on a quiet 2-core machine, minutes when it is
   loaded, ≈ 5 s in a later process that finds Inductor's kernels in its on-disk cache
   (``TORCHINDUCTOR_CACHE_DIR``, default ``/tmp/torchinductor_$USER``) — but that cache is keyed by

@@ -10,11 +10,14 @@ through the compiled graph (AOTAutograd compiles the backward too); forward mode
 called from inside a forward-mode transform either raises or silently drops the tangents
 (tests/optics/test_compiled_gradients.py).
 
-What it buys on CPU today (benchmarks/RESULTS.md, Cooke triplet, 1e6 rays, one thread): 7× eager
-in float64 (3.7× optiland's tracer), another 4× in float32, with peak memory only that of the
-outputs. The whole surface loop is one fused SIMD loop over the rays: the trace internals are
-component-wise, rays are read component-major, and Inductor's fusion-size limit is raised so that it
-does not split the loop into several kernels joined by ray-sized buffers.
+What it buys on CPU today (benchmarks/RESULTS.md issue 14, Cooke triplet, 1e6 rays, one thread):
+≈ 10× optiland's tracer in float64 (≈ 9× the chunked eager trace), within ≈ 2.6× of a bare
+sphere-and-Snell sketch, with peak memory only that of the outputs. The whole surface loop is one
+fused SIMD loop over the rays: the trace internals are component-wise, rays are read
+component-major, Inductor's fusion-size limit is raised so that it does not split the loop into
+several kernels joined by ray-sized buffers, and inside the graph the trace avoids what Inductor's
+C++ code does badly: boolean mask algebra (masks are float flags combined by selects) and gathers
+(per-wavelength tables are looked up by selects).
 
 One compiled function is cached per lens *structure* (surface kinds, stop, ``upto``, ``record``,
 Newton cap, dtype, device). Changing tensor values (an optimizer step) reuses it; changing the
@@ -47,7 +50,7 @@ logger = logging.getLogger(__name__)
 
 _LENS_TENSORS = ("curvature", "conic", "asphere", "phase", "thickness", "index", "wavelength_um", "semi_diameter")
 
-_Key = tuple[tuple[SurfaceShape, ...], int, int | None, bool, int, torch.dtype, torch.device]
+_Key = tuple[tuple[SurfaceShape, ...], int, int | None, bool, int, torch.dtype, torch.device, int]
 _EAGER = "eager"
 _cache: dict[_Key, Callable[..., Any] | str] = {}
 _MAX_FUSION_SIZE = 4096
@@ -86,7 +89,10 @@ def compiled_trace(
         # mode runs the eager trace, without marking the structure as failed. The optimizer's
         # compiled Jacobian (``optim.compiled_jacobian``) compiles the jvp itself instead.
         return trace(lens, rays, upto=upto, record=record, newton_iterations=newton_iterations)
-    key: _Key = (lens.shapes, lens.stop, upto, record, newton_iterations, lens.dtype, lens.device)
+    # The number of wavelengths is part of the structure: the trace looks the index table up by
+    # selects over the wavelengths when it is compiled (``trace._per_ray``).
+    key: _Key = (lens.shapes, lens.stop, upto, record, newton_iterations, lens.dtype, lens.device,
+                 lens.index.shape[-1])
     fn = _cache.get(key)
     if fn is None:
         fn = _cache[key] = _make_compiled(key)

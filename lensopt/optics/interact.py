@@ -58,9 +58,10 @@ def bend_xyz(
     dx, dy, dz = d
     nx, ny, nz = normal
     cos_i = dx * nx + dy * ny + dz * nz
-    orient = torch.where(cos_i < 0, -1.0, 1.0)
-    nx, ny, nz = nx * orient, ny * orient, nz * orient
-    cos_i = cos_i * orient
+    # Orient the normal along the ray: selects of ±n (the same values as multiplying by ±1, without
+    # a float32 sign tensor that a fused kernel would convert lane by lane).
+    flip = cos_i < 0
+    nx, ny, nz = torch.where(flip, -nx, nx), torch.where(flip, -ny, ny), torch.where(flip, -nz, nz)
     vx, vy, vz = n1 * dx, n1 * dy, n1 * dz
     if grating is not None:
         vx, vy = vx + grating[0], vy + grating[1]

@@ -12,7 +12,8 @@ from torch import Tensor
 
 from lensopt.optics.surfaces import sag
 
-__all__ = ["intersect_quadric", "intersect_asphere", "quadric_xyz", "asphere_xyz", "Vec3", "NEWTON_ITERATIONS"]
+__all__ = ["intersect_quadric", "intersect_asphere", "quadric_xyz", "quadric_flag_xyz", "asphere_xyz", "Vec3",
+           "NEWTON_ITERATIONS"]
 
 NEWTON_ITERATIONS = 12
 """Fixed iteration cap: Newton from the conic start converges in 3–5 steps in float64."""
@@ -54,6 +55,19 @@ def intersect_quadric(pos: Tensor, dir: Tensor, c: Tensor, k: Tensor) -> tuple[T
 
 def quadric_xyz(p: Vec3, d: Vec3, c: Tensor, k: Tensor) -> tuple[Tensor, Tensor]:
     """``intersect_quadric`` on components (x, y, z) of shape (*)."""
+    t, hit = quadric_flag_xyz(p, d, c, k)
+    return t, hit > 0
+
+
+def quadric_flag_xyz(p: Vec3, d: Vec3, c: Tensor, k: Tensor, *, shortcuts: bool = False) -> tuple[Tensor, Tensor]:
+    """``quadric_xyz`` with ``hit`` as a float flag (1.0 hit, 0.0 missed) in the rays' dtype.
+
+    The masks are combined by selects on comparisons, never by boolean algebra: inside a
+    ``torch.compile``-d trace, Inductor's C++ backend converts every boolean ``&``/``|``/``~`` lane by
+    lane between mask formats, which cost more than the arithmetic (benchmarks/RESULTS.md, issue 14).
+    The values are those of the boolean formulation. ``shortcuts`` (eager only, no transform
+    watching): skip the far root when every ray meets the sag branch with the near one (same values).
+    """
     rho = 1.0 + k
     px, py, pz = p
     dx, dy, dz = d
@@ -65,22 +79,24 @@ def quadric_xyz(p: Vec3, d: Vec3, c: Tensor, k: Tensor) -> tuple[Tensor, Tensor]
     b = dz - c * (px * dx + py * dy + rho * pz * dz)
     cc = c * (px * px + py * py + rho * pz * pz) - 2.0 * pz
     disc = b * b - a * cc
-    hit = disc >= 0
-    root = torch.sqrt(torch.where(hit, disc, 0.0).clamp_min(torch.finfo(disc.dtype).tiny))
+    root = torch.sqrt(torch.where(disc >= 0, disc, 0.0).clamp_min(torch.finfo(disc.dtype).tiny))
     q = b + torch.where(b >= 0, root, -root)
     t = _safe_div(cc, q)
-    hit = hit & (q.abs() > torch.finfo(q.dtype).eps)
+    eps = torch.finfo(q.dtype).eps
+    hit = torch.where(disc >= 0, torch.where(q.abs() > eps, 1.0, 0.0), 0.0)
     # The sag formula's branch satisfies (1 + κ) c z ≤ 1; the far side of a sphere/ellipsoid and the
     # second sheet of a hyperboloid do not.
     on_sheet = rho * c * (pz + t * dz) <= 1.0
+    if shortcuts and bool(on_sheet.all()):
+        return torch.where(hit > 0, t0 + t, 0.0), hit
     # The other root, q / a: still needed after the transfer when the ray crosses the vertex plane
     # beyond the centre of curvature (b < 0 going forward); then C / q is the far side of the
     # sphere and the sag-branch crossing is q / a.
     t_other = _safe_div(q, a)
-    other_ok = (a.abs() > torch.finfo(a.dtype).eps) & (rho * c * (pz + t_other * dz) <= 1.0)
-    t = torch.where(hit & ~on_sheet & other_ok, t_other, t)
-    hit = hit & (on_sheet | other_ok)
-    return torch.where(hit, t0 + t, 0.0), hit
+    other_ok = torch.where(a.abs() > eps, torch.where(rho * c * (pz + t_other * dz) <= 1.0, 1.0, 0.0), 0.0)
+    t = torch.where(on_sheet, t, torch.where(hit * other_ok > 0, t_other, t))
+    hit = torch.where(on_sheet, hit, hit * other_ok)
+    return torch.where(hit > 0, t0 + t, 0.0), hit
 
 
 def intersect_asphere(

@@ -8,6 +8,7 @@ ray is well behaved and keeps being traced, as in the seed.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from enum import IntEnum
@@ -16,7 +17,7 @@ import torch
 from torch import Tensor
 
 from lensopt.optics.interact import bend_xyz
-from lensopt.optics.intersect import NEWTON_ITERATIONS, asphere_xyz, quadric_xyz
+from lensopt.optics.intersect import NEWTON_ITERATIONS, asphere_xyz, quadric_flag_xyz
 from lensopt.optics.lens import Lens
 from lensopt.optics.placement import surface_frames, to_global, to_local
 from lensopt.optics.surfaces import conic_normal_xyz, normal_xyz, phase_slope, sag
@@ -134,19 +135,38 @@ def trace(
         A ``RayTrace`` with shapes (*B, …) of the broadcast ray batch.
     """
     pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
+    if _chunked(lens, rays, pos):
+        return _trace_in_chunks(lens, rays, pos, dir, upto=upto, record=record, newton_iterations=newton_iterations)
+    return _trace(lens, rays, pos, dir, upto, record, newton_iterations, shortcuts=False)
+
+
+def _trace(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, upto: int | None, record: bool, newton_iterations: int,
+           *, shortcuts: bool) -> RayTrace:
+    """The trace of ``trace``. ``shortcuts`` (eager, nothing watching: the chunked path) skips work
+    that a look at the values shows cannot change them (a select whose condition holds for every
+    ray, the far root of a quadric that no ray needs): the same numbers, fewer full-array passes.
+    Never inside torch.compile, vmap or forward mode, where a branch on values is not allowed."""
+    compiling = torch.compiler.is_compiling()
     batch = pos.shape[:-1]
-    # Running mask + first failure code, kept in the rays' float dtype so that a fused kernel
-    # vectorizes every operation alike (integer lanes cost extra conversions); int64 on return.
-    ok = torch.ones(batch, dtype=torch.bool, device=pos.device)
+    # First failure code and the backtracking flag, kept in the rays' float dtype (int64 and bool
+    # on return), and every mask used only as the condition of a select, never combined by boolean
+    # algebra: inside torch.compile each boolean &, |, ~ costs mask-format conversions lane by lane
+    # (more than the arithmetic around it). The running mask of live rays is ``status == 0``.
     status = torch.zeros(batch, dtype=pos.dtype, device=pos.device)
+    ok = status == _OK
     failed_at = torch.full(batch, -1.0, dtype=pos.dtype, device=pos.device) if record else None
-    backtrack = torch.zeros(batch, dtype=torch.bool, device=pos.device)
+    backtrack = torch.zeros(batch, dtype=pos.dtype, device=pos.device)
     vertex = lens.vertex_z()
     # Decentered/tilted surfaces: rays go into each surface's frame and back (optics.placement);
     # a lens on its axis skips every transform (the symmetric fast path).
     frames = None if lens.placement is None else surface_frames(lens.thickness, lens.placement)
-    lam_mm = lens.wavelength_um[rays.wavelength] * 1e-3
+    if any(shape.diffractive for shape in lens.shapes):
+        lam_mm = lens.wavelength_um[rays.wavelength] * 1e-3
     inv_index = 1.0 / lens.index  # (S+1, W): one division per medium, not per ray and surface
+    # Per-wavelength tables: a gather per surface in eager torch; inside torch.compile a short chain
+    # of selects on the wavelength index as a float (Inductor turns a gather into scalar loads and
+    # bounds checks inside the fused loop; the selects vectorize). Same values either way.
+    wl_select = rays.wavelength.to(pos.dtype) if compiling and lens.index.shape[-1] <= _MAX_SELECT else None
     # Components: fused kernels vectorize over rays only when x, y, z are separate tensors.
     x, y, z = pos.unbind(-1)
     dx, dy, dz = dir.unbind(-1)
@@ -164,17 +184,17 @@ def trace(
         if shape.kind == "asphere":
             t, defined, converged = asphere_xyz((x, y, lz), (dx, dy, dz), c, k, lens.asphere[s],
                                                 iterations=newton_iterations)
-            status, ok = _fail(status, ok, ~defined, Status.MISSED)
-            status, ok = _fail(status, ok, ~converged, Status.NEWTON)
+            status, ok = _fail(status, ok, ~defined, Status.MISSED, shortcuts)
+            status, ok = _fail(status, ok, ~converged, Status.NEWTON, shortcuts)
         else:
-            t, hit = quadric_xyz((x, y, lz), (dx, dy, dz), c, k)
-            status, ok = _fail(status, ok, ~hit, Status.MISSED)
+            t, hit = quadric_flag_xyz((x, y, lz), (dx, dy, dz), c, k, shortcuts=shortcuts)
+            status, ok = _fail(status, ok, hit == 0, Status.MISSED, shortcuts)
         if s > 0:
-            backtrack = backtrack | ((t < 0) & ok)
+            backtrack = _flag(backtrack, ok, t < 0, shortcuts)
         hx, hy, hz = x + t * dx, y + t * dy, lz + t * dz
         u = hx * hx + hy * hy
         if shape.clip:
-            status, ok = _fail(status, ok, u > lens.semi_diameter[s] ** 2, Status.CLIPPED)
+            status, ok = _fail(status, ok, u > lens.semi_diameter[s] ** 2, Status.CLIPPED, shortcuts)
         failed_at = _first_failure(failed_at, ok, s)
         if shape.kind == "asphere":
             _, dz_du, _ = sag(u, c, k, lens.asphere[s])
@@ -196,10 +216,10 @@ def trace(
             # m λ/(2π) ∇φ with ∇φ = 2 dφ/du (x, y, 0): finite at r = 0 (S16–S17).
             g = shape.order * lam_mm / math.pi * phase_slope(u, lens.phase[s])
             grating = (g * hx, g * hy)
-        n1 = lens.index[s][rays.wavelength]
-        inv_n2 = inv_index[s + 1][rays.wavelength]
+        n1 = _per_ray(lens.index[s], rays.wavelength, wl_select)
+        inv_n2 = _per_ray(inv_index[s + 1], rays.wavelength, wl_select)
         d_out, cos2_in, cos2_out, tir = bend_xyz((dx, dy, dz), normal, n1, inv_n2, grating)
-        status, ok = _fail(status, ok, tir, Status.TIR)
+        status, ok = _fail(status, ok, tir, Status.TIR, shortcuts)
         failed_at = _first_failure(failed_at, ok, s)
         if record:
             rec = ((hx, hy, hz), (dx, dy, dz), d_out, normal)
@@ -207,9 +227,13 @@ def trace(
                 o, r = frames.origin[s], frames.rotation[s]
                 rec = (to_global(rec[0], o, r),) + tuple(to_global(v, None, r) for v in rec[1:])
             hits.append(SurfaceHit(*(torch.stack(v, -1) for v in rec), t, cos2_in, cos2_out))
-        x, y, z = torch.where(ok, hx, x), torch.where(ok, hy, y), torch.where(ok, hz, z)
-        # Failed rays keep their last valid position and continue as placeholders along the axis.
-        dx, dy, dz = torch.where(ok, d_out[0], 0.0), torch.where(ok, d_out[1], 0.0), torch.where(ok, d_out[2], 1.0)
+        if shortcuts and bool(ok.all()):
+            (x, y, z), (dx, dy, dz) = (hx, hy, hz), d_out
+        else:
+            x, y, z = torch.where(ok, hx, x), torch.where(ok, hy, y), torch.where(ok, hz, z)
+            # Failed rays keep their last valid position and continue as placeholders along the axis.
+            dx, dy, dz = (torch.where(ok, d_out[0], 0.0), torch.where(ok, d_out[1], 0.0),
+                          torch.where(ok, d_out[2], 1.0))
         if frames is not None:
             x, y, z = to_global((x, y, z), frames.origin[s], frames.rotation[s])
             dx, dy, dz = to_global((dx, dy, dz), None, frames.rotation[s])
@@ -224,13 +248,57 @@ def trace(
         eps = torch.finfo(dz.dtype).eps
         parallel = dz.abs() <= eps
         t = (image_z - z) / torch.where(parallel, 1.0, dz)
-        status, ok = _fail(status, ok, parallel, Status.MISSED)
+        status, ok = _fail(status, ok, parallel, Status.MISSED, shortcuts)
         failed_at = _first_failure(failed_at, ok, lens.num_surfaces)
-        backtrack = backtrack | ((t < 0) & ok)
+        backtrack = _flag(backtrack, ok, t < 0, shortcuts)
         x, y, z = torch.where(ok, x + t * dx, x), torch.where(ok, y + t * dy, y), torch.where(ok, z + t * dz, z)
     return RayTrace(pos=torch.stack([x, y, z], -1), dir=torch.stack([dx, dy, dz], -1), status=status.long(),
-                    backtrack=backtrack, hits=tuple(hits),
+                    backtrack=backtrack > 0, hits=tuple(hits),
                     failed_at=None if failed_at is None else failed_at.long())
+
+
+CHUNK_RAYS = 1 << 16
+"""Rays per chunk of the eager trace when nothing needs gradients: every eager op writes a full
+array, and on arrays of ≈ 0.5 MB (64 Ki rays, float64) that stays in the CPU caches instead of
+main memory (1.5–2× faster at 1e6 rays, benchmarks/RESULTS.md issue 14; the same numbers bit for bit)."""
+
+
+def _chunked(lens: Lens, rays: Rays, pos: Tensor) -> bool:
+    """Whether ``trace`` should run in chunks of ``CHUNK_RAYS``: many rays on the CPU (a GPU has no
+    such cache effect, and each chunk would cost kernel launches), eager, and no autograd, forward-mode
+    or functorch transform watching (the optimizer's paths stay one call)."""
+    if pos.numel() < 6 * CHUNK_RAYS or pos.device.type != "cpu" or torch.compiler.is_compiling():
+        return False
+    from torch._C._functorch import is_functorch_wrapped_tensor
+    from torch.autograd.forward_ad import unpack_dual
+
+    tensors = [pos, rays.dir, rays.wavelength]
+    for holder in (lens, lens.placement):
+        if holder is not None:
+            tensors += [v for f in dataclasses.fields(holder) if isinstance(v := getattr(holder, f.name), Tensor)]
+    grad = torch.is_grad_enabled()
+    return not any((grad and t.requires_grad) or is_functorch_wrapped_tensor(t) or unpack_dual(t).tangent is not None
+                   for t in tensors)
+
+
+def _trace_in_chunks(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, **kwargs) -> RayTrace:
+    """``trace`` over consecutive chunks of the flattened ray batch, concatenated (same values)."""
+    batch = pos.shape[:-1]
+    pos, dir = pos.reshape(-1, 3), dir.reshape(-1, 3)
+    wavelength = torch.broadcast_to(rays.wavelength, batch).reshape(-1)
+    parts = [_trace(lens, Rays(pos[i:i + CHUNK_RAYS], dir[i:i + CHUNK_RAYS], wavelength[i:i + CHUNK_RAYS]),
+                    pos[i:i + CHUNK_RAYS], dir[i:i + CHUNK_RAYS], kwargs["upto"], kwargs["record"],
+                    kwargs["newton_iterations"], shortcuts=True)
+             for i in range(0, pos.shape[0], CHUNK_RAYS)]
+
+    def cat(values: list[Tensor]) -> Tensor:
+        return torch.cat(values).reshape(batch + values[0].shape[1:])
+
+    hits = tuple(SurfaceHit(*(cat([getattr(p.hits[i], f.name) for p in parts]) for f in dataclasses.fields(SurfaceHit)))
+                 for i in range(len(parts[0].hits)))
+    return RayTrace(pos=cat([p.pos for p in parts]), dir=cat([p.dir for p in parts]),
+                    status=cat([p.status for p in parts]), backtrack=cat([p.backtrack for p in parts]), hits=hits,
+                    failed_at=None if parts[0].failed_at is None else cat([p.failed_at for p in parts]))
 
 
 def _first_failure(failed_at: Tensor | None, ok: Tensor, surface: int) -> Tensor | None:
@@ -238,12 +306,38 @@ def _first_failure(failed_at: Tensor | None, ok: Tensor, surface: int) -> Tensor
     recording; the plain trace skips the bookkeeping)."""
     if failed_at is None:
         return None
-    return torch.where(~ok & (failed_at < 0), float(surface), failed_at)
+    return torch.where(ok, failed_at, torch.where(failed_at < 0, float(surface), failed_at))
 
 
-def _fail(status: Tensor, ok: Tensor, failed: Tensor, reason: Status) -> tuple[Tensor, Tensor]:
-    """Record ``reason`` for rays that fail now and had not failed before; update the running mask."""
-    return torch.where(ok & failed, _CODE[reason], status), ok & ~failed
+def _fail(status: Tensor, ok: Tensor, failed: Tensor, reason: Status, shortcuts: bool) -> tuple[Tensor, Tensor]:
+    """Record ``reason`` for rays that fail now and had not failed before (``ok``: the live rays);
+    the new status and running mask (unchanged, with ``shortcuts``, when no ray fails here)."""
+    if shortcuts and not bool(failed.any()):
+        return status, ok
+    status = torch.where(failed, torch.where(ok, _CODE[reason], status), status)
+    return status, status == _OK
+
+
+def _flag(flag: Tensor, ok: Tensor, now: Tensor, shortcuts: bool) -> Tensor:
+    """The float flag (0/1) set where ``now`` holds for a live ray (``ok``), else kept."""
+    if shortcuts and not bool(now.any()):
+        return flag
+    return torch.where(now, torch.where(ok, 1.0, flag), flag)
+
+
+_MAX_SELECT = 8
+"""Largest number of wavelengths looked up by selects rather than a gather inside torch.compile."""
+
+
+def _per_ray(row: Tensor, wavelength: Tensor, wl_select: Tensor | None) -> Tensor:
+    """``row[wavelength]`` (row: (W,) per-wavelength values); with ``wl_select`` (the wavelength
+    index as a float tensor) by ``torch.where`` selects, which give the same values."""
+    if wl_select is None:
+        return row[wavelength]
+    out = torch.where(wl_select == 0.0, row[0], row[-1])
+    for j in range(1, row.shape[0] - 1):
+        out = torch.where(wl_select == float(j), row[j], out)
+    return out
 
 
 _CODE = {reason: float(reason.value) for reason in Status}
