@@ -81,9 +81,27 @@ def stress(window: str, count: int, repeats: int = 1, workers: int = 2) -> colle
     return collections.Counter((signal.Signals(sig).name, outcome) for sig, outcome in got)
 
 
+def entry_latency(runs: int = 10) -> list[float]:
+    """Seconds from spawning ``python -m lensopt --version`` to lensopt's handlers being in place: the
+    pre-entry window, where the operating system's default applies."""
+    out = []
+    for _ in range(runs):
+        t0 = time.monotonic()
+        proc = subprocess.Popen([sys.executable, "-m", "lensopt", "--version"], stdout=subprocess.DEVNULL, env=ENV)
+        while not _handlers_installed(proc.pid):
+            time.sleep(0.0002)
+        out.append(time.monotonic() - t0)
+        proc.wait()
+    return out
+
+
 if __name__ == "__main__":
     reps = int(sys.argv[1]) if len(sys.argv) > 1 else 3
     windows = [("startup", 31), ("shutdown", 13)] + ([("pre-entry", 1)] if "--pre-entry" in sys.argv else [])
+    if "--pre-entry" in sys.argv:
+        lat = sorted(entry_latency())
+        print(f"pre-entry window: median {lat[len(lat) // 2] * 1e3:.0f} ms ({lat[0] * 1e3:.0f}–{lat[-1] * 1e3:.0f} ms, "
+              f"{len(lat)} runs)")
     for name, n in windows:
         t0 = time.monotonic()
         counts = stress(name, n, repeats=reps if name != "pre-entry" else 10 * reps)
