@@ -2,4 +2,5 @@
 
 from lensopt.cli import app
 
-app(prog_name="lensopt")
+if __name__ == "__main__":  # not when a worker process (Dask, multiprocessing spawn) imports this module
+    app(prog_name="lensopt")

@@ -18,6 +18,7 @@ from lensopt.cli_backend import BackendOpt, with_backend
 from lensopt.cli_common import (  # noqa: F401  (re-exported: commands of other modules import them from here)
     AimOpt,
     AimStepsOpt,
+    DeviceOpt,
     JsonOpt,
     LensArg,
     LensoptGroup,
@@ -73,10 +74,11 @@ def main(verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Debug lo
     logging.basicConfig(level=logging.DEBUG if verbose else logging.WARNING, handlers=[handler], force=True)
 
 
-def load_model(path: Path) -> Model:
+def load_model(path: Path, device: Any = None) -> Model:
+    """The built lens, its tensors on ``device`` (a torch.device; None: the CPU)."""
     from lensopt.spec import build, load_spec
 
-    return build(load_spec(path))
+    return build(load_spec(path), device=device)
 
 
 def parse_sampling(text: str, seed: int, option: str = "--sampling"):  # noqa: ANN201
@@ -438,11 +440,14 @@ def simulate(
     seed: SeedOpt = 0,
     as_json: JsonOpt = False,
     backend: BackendOpt = "auto",
+    device: DeviceOpt = "cpu",
 ) -> None:
     """Simulate a scene through the lens, computing only the effects the scene calls for."""
     from lensopt.cli_imaging import parse_grid, render_plan, render_run, run_simulate
+    from lensopt.cli_restore import resolve_device
     from lensopt.resources import require
 
+    dev = resolve_device(device)
     psf_grid = parse_grid(grid)
     if psf_grid is not None:  # each cell holds RGB PSFs of up to 161×161 float32 bins, a few copies
         require(psf_grid[0] * psf_grid[1] * 161 * 161 * 3 * 4 * 4, f"a {grid} PSF grid", lower="--grid", path="--grid")
@@ -453,7 +458,7 @@ def simulate(
         check_output(output, (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr"), what="image file")
     if not 0.0 <= overlap < 1.0:
         raise LensoptError("must lie in [0, 1)", path="--overlap", got=overlap)
-    result = run_simulate(load_model(lens), image, output, region=region, effects=effects, reference=reference,
+    result = run_simulate(load_model(lens, dev), image, output, region=region, effects=effects, reference=reference,
                           plan_only=plan_only, sampling=rays, kernel=kernel, grid=psf_grid, overlap=overlap,
                           seed=seed, on_plan=None if as_json else render_plan, score=score)
     if as_json:
@@ -522,6 +527,7 @@ from lensopt import (  # noqa: E402
     cli_evaluate,
     cli_optimize,
     cli_restore,
+    cli_sweep,
     cli_tolerance,
     cli_zemax,
 )
@@ -533,6 +539,7 @@ cli_tolerance.register(app, plot_app)
 cli_zemax.register(app)
 cli_restore.register(app)
 cli_optimize.register(app)
+cli_sweep.register(app)
 
 if __name__ == "__main__":  # pragma: no cover
     app()

@@ -31,27 +31,16 @@ try:  # typer ≥ 0.20 vendors click
 except ImportError:  # pragma: no cover
     from click import exceptions as click_exc  # type: ignore[no-redef]
 
+from lensopt.cli_process import EX_SIGINT, EX_SIGTERM, Interrupted, Terminated, is_cli_process, state
 from lensopt.errors import LensoptError
 
-__all__ = ["AimOpt", "AimStepsOpt", "check_seed", "EX_INTERNAL", "JsonOpt", "LensArg", "SamplingOpt", "SeedOpt",
-           "Terminated", "check_output", "console", "err_console", "handle_errors", "LensoptGroup",
+__all__ = ["AimOpt", "AimStepsOpt", "check_seed", "DeviceOpt", "EX_INTERNAL", "JsonOpt", "LensArg", "SamplingOpt",
+           "SeedOpt",
+           "Interrupted", "Terminated", "check_output", "console", "err_console", "handle_errors", "LensoptGroup",
            "report_signal", "signals_deferred", "state", "print_json", "LowerLevelFormatter"]
 
-EX_USAGE, EX_INTERNAL, EX_SIGINT, EX_SIGTERM = 2, 70, 130, 143
+EX_USAGE, EX_INTERNAL = 2, 70
 F = TypeVar("F", bound=Callable[..., Any])
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised like Ctrl-C so that every ``except KeyboardInterrupt`` keeps the best state."""
-
-
-class _State:
-    verbose = False
-    signal_exit = EX_SIGINT  # the exit code of the last signal received
-    signal_reported = False  # its one line is printed
-
-
-state = _State()
 
 
 # Wide enough for tables when the stream is a pipe or a file (rich would assume 80 columns).
@@ -74,6 +63,8 @@ AimStepsOpt = Annotated[int | None, typer.Option("--aim-steps",
 SeedOpt = Annotated[int, typer.Option("--seed", callback=check_seed,
                                       help="Seed of every random draw (pupil jitter), 0 to 2**63 - 1.")]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object instead of tables.")]
+DeviceOpt = Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N | auto: where the lens is traced and the "
+                                        "images are computed.")]
 
 
 def _one_line(text: str) -> str:
@@ -96,20 +87,22 @@ def handle_errors(fn: F) -> F:
             return fn(*args, **kwargs)
         except (typer.Exit, typer.Abort, click_exc.ClickException):
             raise
-        except LensoptError as err:
-            error_line(str(err))
-            raise typer.Exit(EX_USAGE) from None
         except KeyboardInterrupt:
             raise typer.Exit(report_signal()) from None
-        except RecursionError:
-            error_line("input nested too deeply")
-            raise typer.Exit(EX_USAGE) from None
-        except MemoryError:
-            error_line("out of memory; lower the sampling, image size or grid (see --max-memory)")
-            raise typer.Exit(EX_USAGE) from None
         except BrokenPipeError:
             raise typer.Exit(0) from None
         except Exception as err:
+            if state.signal_received:  # what the signal cut short failed after it (e.g. an import cut in half)
+                raise typer.Exit(report_signal()) from None
+            if isinstance(err, LensoptError):
+                error_line(str(err))
+                raise typer.Exit(EX_USAGE) from None
+            if isinstance(err, RecursionError):
+                error_line("input nested too deeply")
+                raise typer.Exit(EX_USAGE) from None
+            if isinstance(err, MemoryError):
+                error_line("out of memory; lower the sampling, image size or grid (see --max-memory)")
+                raise typer.Exit(EX_USAGE) from None
             if state.verbose:
                 raise
             error_line(f"internal error ({type(err).__name__}: {err}); please report it, with the command and "
@@ -131,22 +124,102 @@ def report_signal(line: str | None = None) -> int:
     return state.signal_exit
 
 
+# Raising from a signal handler is safe in Python code, not while a module is being imported: extension
+# modules run their initialisation through Python callbacks that cannot pass an exception on (torch's
+# pybind11 code then calls std::terminate — exit −6 —, numpy's cannot be imported again). A signal that
+# lands inside an import is delivered again RETRY_S later, until the import is over.
+RETRY_S = 0.01
+_retry_signal: list[int] = []
+_retrying: list[bool] = []  # per nested _signal_handlers: whether signals are retried (the real process)
+_unraisable_hooks: list[Any] = []  # the hook in force before the command's
+
+
+def _in_import(frame: Any) -> bool:
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib._bootstrap"):
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _deliver(signum: int, frame: Any, exc: type[KeyboardInterrupt], code: int) -> None:
+    state.signal_exit, state.signal_received = code, True
+    if _retrying and _retrying[-1] and _in_import(frame):
+        _retry_signal[:] = [signum]
+        signal.setitimer(signal.ITIMER_REAL, RETRY_S)  # → _on_retry
+        return
+    raise exc()
+
+
+def _on_retry(signum: int, frame: Any) -> None:
+    """SIGALRM: deliver the deferred signal again, to whatever handler is in force now."""
+    if _retry_signal:
+        signal.raise_signal(_retry_signal.pop())
+
+
+def _on_unraisable(unraisable: Any) -> None:
+    """A signal's exception raised inside a finalizer (``__del__``, a weakref or gc callback), where Python
+    can only print it and drop it: deliver the signal again instead, outside the finalizer."""
+    exc = unraisable.exc_value
+    if isinstance(exc, Interrupted | Terminated) and _retrying and _retrying[-1]:
+        _retry_signal[:] = [signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT]
+        signal.setitimer(signal.ITIMER_REAL, RETRY_S)
+        return
+    (_unraisable_hooks[-1] if _unraisable_hooks else sys.__unraisablehook__)(unraisable)
+
+
 def _on_sigterm(signum: int, frame: Any) -> None:
-    state.signal_exit = EX_SIGTERM
-    raise Terminated()
+    _deliver(signum, frame, Terminated, EX_SIGTERM)
 
 
 def _on_sigint(signum: int, frame: Any) -> None:
-    state.signal_exit = EX_SIGINT
-    raise KeyboardInterrupt()
+    _deliver(signum, frame, Interrupted, EX_SIGINT)  # not KeyboardInterrupt itself: see lensopt/cli_process.py
 
 
 @contextlib.contextmanager
-def _signal_handlers() -> Iterator[None]:
-    """SIGINT → KeyboardInterrupt, SIGTERM → Terminated (a KeyboardInterrupt) while a command runs."""
+def _signal_handlers(retry: bool | None = None) -> Iterator[None]:
+    """SIGINT → Interrupted, SIGTERM → Terminated (both KeyboardInterrupts) while a command runs. With
+    ``retry`` (default: in the real ``lensopt`` process only, so that in-process runs keep their SIGALRM
+    and unraisable hook), a signal inside an import or a finalizer is delivered again when it can be
+    raised (SIGALRM, ``RETRY_S``)."""
+    retry = (is_cli_process() if retry is None else retry) and hasattr(signal, "setitimer")
+    handlers = [(signal.SIGINT, _on_sigint), (signal.SIGTERM, _on_sigterm)]
+    if retry:
+        handlers.append((signal.SIGALRM, _on_retry))
     try:
-        old = {s: signal.signal(s, h) for s, h in ((signal.SIGINT, _on_sigint), (signal.SIGTERM, _on_sigterm))}
+        old = {s: signal.signal(s, h) for s, h in handlers}
     except ValueError:  # not the main thread (an embedding application): leave signals alone
+        yield
+        return
+    _retrying.append(retry)
+    if retry:
+        _unraisable_hooks.append(sys.unraisablehook)
+        sys.unraisablehook = _on_unraisable
+    try:
+        yield
+    finally:
+        if retry:
+            signal.setitimer(signal.ITIMER_REAL, 0)  # a retry not yet due: the exit code already says it
+            _retry_signal.clear()
+            sys.unraisablehook = _unraisable_hooks.pop()
+        _retrying.pop()
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+@contextlib.contextmanager
+def signals_deferred() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM until the block ends (then the first one is acted on), e.g. while writing the
+    result. The Python handlers are swapped, not the thread's signal mask: a process-directed signal may
+    land on any thread (torch's workers), and a mask would be inherited by subprocesses."""
+    held: list[int] = []
+
+    def hold(signum: int, frame: Any) -> None:
+        held.append(signum)
+
+    try:
+        old = {s: signal.signal(s, hold) for s in (signal.SIGINT, signal.SIGTERM)}
+    except ValueError:  # not the main thread: leave signals alone
         yield
         return
     try:
@@ -154,21 +227,12 @@ def _signal_handlers() -> Iterator[None]:
     finally:
         for s, h in old.items():
             signal.signal(s, h)
-
-
-@contextlib.contextmanager
-def signals_deferred() -> Iterator[None]:
-    """Block SIGINT and SIGTERM (delivered on exit from the block), e.g. while writing the result."""
-    sigs = {signal.SIGINT, signal.SIGTERM}
-    try:
-        signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
-    except (ValueError, AttributeError, OSError):  # pragma: no cover
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, sigs)
+        if held:
+            handler = old[held[0]]
+            if callable(handler):
+                handler(held[0], None)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(held[0])
 
 
 class LensoptGroup(TyperGroup):
@@ -188,7 +252,7 @@ class LensoptGroup(TyperGroup):
     def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
              standalone_mode: bool = True, **extra: Any) -> Any:
         code = 0
-        state.signal_exit, state.signal_reported, state.verbose = EX_SIGINT, False, False
+        state.signal_exit, state.signal_reported, state.signal_received, state.verbose = EX_SIGINT, False, False, False
         try:
             with _signal_handlers():
                 rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
@@ -210,6 +274,8 @@ class LensoptGroup(TyperGroup):
             code = report_signal()
         except typer.Exit as err:
             code = err.exit_code
+        if state.signal_received:  # a signal came during the command: its code and one line, whatever followed
+            code = report_signal()
         if not standalone_mode:
             return code
         sys.exit(code)

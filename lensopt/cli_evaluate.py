@@ -19,13 +19,15 @@ __all__ = ["register"]
 
 def register(app: typer.Typer, plot_app: typer.Typer | None = None) -> None:
     """Add the ``evaluate`` command to ``app`` (and ``plot regions`` to ``plot_app``)."""
-    from lensopt.cli import JsonOpt, LensArg, console, err_console, handle_errors, load_model, print_json
+    from lensopt.cli import DeviceOpt, JsonOpt, LensArg, console, err_console, handle_errors, load_model, print_json
+    from lensopt.cli_backend import BackendOpt, with_backend
 
     if plot_app is not None:
         _register_plot(plot_app)
 
     @app.command()
     @handle_errors
+    @with_backend(err_console)
     def evaluate(
         lens: LensArg,
         images: Annotated[Path | None, typer.Option("--images", help="Folder of PNG/JPEG/TIFF/EXR images (DIV2K: "
@@ -44,15 +46,19 @@ def register(app: typer.Typer, plot_app: typer.Typer | None = None) -> None:
         as_json: JsonOpt = False,
         irm: Annotated[Path | None, typer.Option("--irm", help="Restoration network checkpoint (train-irm or "
                                                  "joint): score before and after restoration.")] = None,
+        backend: BackendOpt = "auto",
+        device: DeviceOpt = "cpu",
     ) -> None:
         """Pre-restoration PSNR and SSIM of central crops, each paired with a sensor tile (S4.3.1)."""
         from lensopt.cli_imaging import parse_grid
+        from lensopt.cli_restore import resolve_device
         from lensopt.imaging.evaluate import evaluate as run_evaluate
         from lensopt.imaging.evaluate import scene_source
         from lensopt.imaging.plan import PlanOptions
         from lensopt.optics.sampling import PupilSampling
         from lensopt.spec import camera_of
 
+        dev = resolve_device(device)
         if patch < 8:
             raise LensoptError("must be at least 8 pixels", path="--patch", got=patch)
         PupilSampling.parse(rays, path="--rays")
@@ -63,7 +69,8 @@ def register(app: typer.Typer, plot_app: typer.Typer | None = None) -> None:
         from lensopt.imaging.regions import tile_grid
         from lensopt.imaging.simulate import sensor_of
 
-        camera = camera_of(load_model(lens))
+        model = load_model(lens, dev)
+        camera = camera_of(model)
         tile_grid(sensor_of(camera, patch, patch)[0], patch, option="--patch")  # bad sensor/patch: before the bar
         scenes, names, desc = scene_source(images, count=count, patch=patch, seed=seed)
         options = PlanOptions(sampling=rays, kernel=kernel, grid=parse_grid(grid), seed=seed)
@@ -71,7 +78,7 @@ def register(app: typer.Typer, plot_app: typer.Typer | None = None) -> None:
         if irm is not None:
             from lensopt.cli_restore import irm_hook
 
-            hooks.append(irm_hook(load_model(lens), irm))
+            hooks.append(irm_hook(model, irm))
         results = []
         for hook in hooks:
             with Progress(TextColumn("evaluating" if hook is None else "restoring"), BarColumn(),

@@ -50,12 +50,12 @@ def stop_on_signals() -> Iterator[list[bool]]:
     flag = [False]
     old = {}
 
-    from lensopt.cli_common import state
+    from lensopt.cli_common import Interrupted, state
 
     def handler(signum: int, frame: Any) -> None:
         if flag[0] and signum == signal.SIGINT:
-            raise KeyboardInterrupt
-        state.signal_exit = 143 if signum == signal.SIGTERM else 130
+            raise Interrupted  # not KeyboardInterrupt itself: see lensopt/cli_process.py
+        state.signal_exit, state.signal_received = (143 if signum == signal.SIGTERM else 130), True
         flag[0] = True
 
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -317,6 +317,8 @@ def irm_hook(model: Any, checkpoint: Path) -> Any:
     from lensopt.optim.irm_run import load_network, restore_image
 
     net, ck = load_network(checkpoint, model.spec, option="--irm")
+    device = model.lens.device
+    net = net.to(device)
     im = ck.meta.get("settings", {}).get("imaging", {})
     setup = imaging_setup(model.spec, patch=16, fields=int(im.get("fields", 9)), sampling=im.get("sampling", "rings:8"),
                           psf_size=int(im.get("psf_size", 31)), grid=tuple(im.get("grid", (3, 3))))
@@ -325,8 +327,9 @@ def irm_hook(model: Any, checkpoint: Path) -> Any:
         if capture.shape[1] != net.config.channels:
             raise LensoptError(f"the network restores {net.config.channels}-channel images", path="--irm",
                                got=f"{capture.shape[1]} channels")
-        return restore_image(net, model.lens, model.system, setup, capture[0], info["region"],
-                             tile=int(im.get("patch", 256)))[None]
+        out = restore_image(net, model.lens, model.system, setup, capture[0].to(device), info["region"],
+                            tile=int(im.get("patch", 256)))
+        return out[None].cpu()
 
     return hook
 

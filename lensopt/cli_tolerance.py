@@ -16,7 +16,7 @@ from lensopt.errors import LensoptError
 
 __all__ = ["register", "mtf_report", "tolerance_report"]
 
-_METRIC_UNITS = {"esr": "µm", "rms": "µm", "mtf": "", "distortion": "%"}
+_METRIC_UNITS = {"esr": "µm", "rms": "µm", "mtf": "", "distortion": "%", "psnr": "dB"}
 
 
 def mtf_report(model: Any, frequencies: list[float], *, method: str = "heuristic",
@@ -44,10 +44,25 @@ def parse_frequencies(text: str, path: str) -> list[float]:
         raise LensoptError("expected comma-separated numbers (cycles/mm)", path=path, got=text) from None
 
 
+def parse_fields(text: str) -> Any:
+    """``--fields``: ``y``, ``xy`` or relative field points ``x,y;x,y;…``."""
+    if text.strip() in ("y", "xy"):
+        return text.strip()
+    try:
+        pts = [tuple(float(v) for v in part.split(",")) for part in text.split(";") if part.strip()]
+    except ValueError:
+        pts = []
+    if not pts or any(len(p) != 2 or not all(map(math.isfinite, p)) for p in pts):
+        raise LensoptError("expected y, xy or relative field points x,y;x,y;…", path="--fields", got=text)
+    return pts
+
+
 def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, workers: int, out_dir: Path | None,
                      worst: int, inverse_delta: float | None, sensitivity: bool = True,
-                     compiled: bool = False) -> dict[str, Any]:
-    """Run sensitivity and Monte Carlo; write plots and worst trials under ``out_dir``; plain data."""
+                     compiled: bool = False, restore: Any = None) -> dict[str, Any]:
+    """Run sensitivity and Monte Carlo; write plots and worst trials under ``out_dir``; plain data.
+    ``restore``: the restoration hook of the psnr metric (``--irm``)."""
+    import numpy as np
     import torch
 
     from lensopt.spec.io import save_json
@@ -61,7 +76,7 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
     )
     from lensopt.tolerance.run import sensitivity as run_sensitivity
 
-    job = make_job(model, settings)
+    job = make_job(model, settings, restore=restore)
     if compiled:
         import dataclasses
 
@@ -72,8 +87,11 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
     report: dict[str, Any] = {
         "lens": model.spec.name, "metric": job.metric, "unit": unit, "higher_is_better": HIGHER_IS_BETTER[job.metric],
         "sampling": settings.sampling, "compensator": settings.compensator, "seed": settings.seed,
+        "aim": settings.aim,
+        "fields": (model.system.rel_field if job.setup.field_xy is None else job.setup.field_xy.tolist()),
         "nominal": {"value": m0, "focus_shift_mm": float(nominal["focus_shift"][0]),
-                    "esr_um": float(nominal["esr"][0] * 1e3)},
+                    "esr_um": float(nominal["esr"][0] * 1e3),
+                    **{f"{k}_db": float(nominal[k][0]) for k in ("psnr_pre", "psnr_post") if k in nominal}},
         "tolerances": [{"name": t.name, "kind": t.kind, "target": t.target, "limit": t.limit,
                         "distribution": t.distribution} for t in job.tols],
     }
@@ -84,7 +102,7 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
                                   "focus_minus_mm": r.focus_minus, "focus_plus_mm": r.focus_plus,
                                   "inverse": r.inverse, "failed_rays": r.failed_rays} for r in rows]
         report["inverse_target"] = target
-        report["rss"] = rss_prediction(rows, job.tols, m0)
+        report["rss"] = rss_prediction(rows, job.tols, m0, higher_is_better=HIGHER_IS_BETTER[job.metric])
     if settings.trials > 0:
         start = time.perf_counter()
         mc = monte_carlo(job, settings.trials, settings.seed, scheduler=scheduler, workers=workers)
@@ -100,7 +118,12 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
             for rank, k in enumerate(mc.worst(worst)):
                 params = job.params(torch.from_numpy(mc.values[k:k + 1]))
                 offsets = mc.metrics["lm_offsets"][k] if "lm_offsets" in mc.metrics else None
-                spec = trial_spec(model, params, float(mc.metrics["focus_shift"][k]),
+                dz = float(mc.metrics["focus_shift"][k])
+                if job.psnr is not None:  # imaged with the compensators relative to the nominal's
+                    dz -= job.psnr.focus_reference
+                    if offsets is not None and job.psnr.lm_reference is not None:
+                        offsets = offsets - np.asarray(job.psnr.lm_reference)
+                spec = trial_spec(model, params, dz,
                                   name=f"{model.spec.name} — tolerance trial {k} (rank {rank + 1} worst)",
                                   lm_vars=job.setup.lm_vars, lm_offsets=offsets)
                 path = out_dir / f"worst_{rank + 1}_trial_{k}.json"
@@ -127,6 +150,7 @@ def _describe(v: Any) -> dict[str, float]:
 
 def _plots(out_dir: Path, report: dict[str, Any], mc: Any, rows: list[Any], metric: str, unit: str,
            name: str) -> None:
+    higher = bool(report["higher_is_better"])
     from lensopt.plot.style import save_figure
     from lensopt.plot.tolerance import cdf_figure, histogram_figure, sensitivity_figure
 
@@ -136,7 +160,8 @@ def _plots(out_dir: Path, report: dict[str, Any], mc: Any, rows: list[Any], metr
         rss = report.get("rss")
         pred = (rss["mean"], rss["std"]) if rss else None
         m0 = report["nominal"]["value"]
-        save_figure(cdf_figure(mc.scalar, metric=label, nominal=m0, title=name, predicted=pred), out_dir / "cdf.png")
+        save_figure(cdf_figure(mc.scalar, metric=label, nominal=m0, title=name, predicted=pred,
+                                       higher_is_better=higher), out_dir / "cdf.png")
         save_figure(histogram_figure(mc.scalar, metric=label, nominal=m0, title=name), out_dir / "histogram.png")
         files += ["cdf.png", "histogram.png"]
     if rows:
@@ -149,7 +174,8 @@ def _plots(out_dir: Path, report: dict[str, Any], mc: Any, rows: list[Any], metr
 def _render(console: Any, r: dict[str, Any], top: int = 15) -> None:
     unit = r["unit"]
     console.print(f"[bold]{r['lens']}[/] — metric {r['metric']} {unit}, compensator {r['compensator']}, "
-                  f"sampling {r['sampling']}; nominal {r['nominal']['value']:.4f} "
+                  f"sampling {r['sampling']}, {len(r['fields'])} fields, aim {r['aim']}; "
+                  f"nominal {r['nominal']['value']:.4f} "
                   f"(focus shift {r['nominal']['focus_shift_mm'] * 1e3:+.1f} µm), {len(r['tolerances'])} tolerances")
     if "sensitivity" in r:
         t = Table(title=f"Sensitivity (Δ {r['metric']} at ∓limit), inverse for Δ = {r['inverse_target']:.4g}")
@@ -161,7 +187,8 @@ def _render(console: Any, r: dict[str, Any], top: int = 15) -> None:
                       f"{s['focus_minus_mm'] * 1e3:+.1f}/{s['focus_plus_mm'] * 1e3:+.1f}")
         console.print(t)
         rss = r["rss"]
-        console.print(f"RSS prediction: mean {rss['mean']:.4f}, std {rss['std']:.4f}, 90 % ≤ {rss['p90']:.4f}; "
+        at = "≥" if r["higher_is_better"] else "≤"
+        console.print(f"RSS prediction: mean {rss['mean']:.4f}, std {rss['std']:.4f}, 90 % {at} {rss['p90']:.4f}; "
                       f"classical RSS {rss['rss_worst']:.4f}")
     if "monte_carlo" in r:
         mc = r["monte_carlo"]
@@ -209,10 +236,17 @@ def register(app: typer.Typer, plot_app: typer.Typer) -> None:
         trials: Annotated[int | None, typer.Option("--trials", min=0, help="Monte-Carlo trials (0: none).")] = None,
         seed: Annotated[int | None, typer.Option("--seed", callback=check_seed,
                                                      help="Seed of the draws and the pupil jitter.")] = None,
-        metric: Annotated[str | None, typer.Option("--metric", help="esr | rms | mtf | distortion.")] = None,
+        metric: Annotated[str | None, typer.Option("--metric", help="esr | rms | mtf | distortion | psnr.")] = None,
+        irm: Annotated[Path | None, typer.Option("--irm", help="Restoration network checkpoint (train-irm or "
+                                                 "joint): the psnr metric after restoration (implies "
+                                                 "--metric psnr).")] = None,
         mtf_frequency: Annotated[float | None, typer.Option("--mtf-frequency", help="cycles/mm of the MTF "
                                                             "metric.")] = None,
         sampling: Annotated[str | None, typer.Option("--sampling", help="Pupil sampling per trial.")] = None,
+        fields: Annotated[str | None, typer.Option("--fields", help="y (the +y fields), xy (±x and ±y) or "
+                                                   "relative points x,y;x,y;… (decentered lenses).")] = None,
+        aim: Annotated[str | None, typer.Option("--aim", help="none | chief: aim each trial's chief rays at "
+                                                "its own (decentered) stop centre.")] = None,
         compensator: Annotated[str | None, typer.Option("--compensator", help="focus | lm | none (lm: "
                                                         "the spec's variables by a few LM steps).")] = None,
         scheduler: Annotated[str, typer.Option("--scheduler", help="local (a 2-worker Dask LocalCluster), "
@@ -240,9 +274,13 @@ def register(app: typer.Typer, plot_app: typer.Typer) -> None:
                 raise LensoptError("the lens has no [tolerance] section; give --tolerances FILE or --profile s6.2",
                                    path="--tolerances")
             base = ToleranceSpec(profile="s6.2")
+        if irm is not None and metric is None:
+            metric = "psnr"
         changes = {k: v for k, v in {"profile": profile, "trials": trials, "seed": seed, "metric": metric,
                                      "mtf_frequency": mtf_frequency, "sampling": sampling,
-                                     "compensator": compensator}.items() if v is not None}
+                                     "compensator": compensator, "aim": aim,
+                                     "fields": None if fields is None else parse_fields(fields)}.items()
+                   if v is not None}
         try:
             settings = ToleranceSpec.model_validate({**base.model_dump(), **changes})
         except Exception as err:  # pydantic ValidationError → one line naming the option
@@ -250,9 +288,17 @@ def register(app: typer.Typer, plot_app: typer.Typer) -> None:
             where = "--" + str(first["loc"][0]).replace("_", "-") if first["loc"] else "--tolerances"
             raise LensoptError(first["msg"], path=where) from None
         sched = None if scheduler == "serial" else scheduler
+        hook = None
+        if irm is not None:
+            if settings.metric != "psnr":
+                raise LensoptError("--irm scores PSNR after restoration: use it with --metric psnr", path="--irm",
+                                   got=settings.metric)
+            from lensopt.cli_restore import irm_hook
+
+            hook = irm_hook(model, irm)
         report = tolerance_report(model, settings, scheduler=sched, workers=workers, out_dir=output_dir,
                                   worst=worst, inverse_delta=inverse_delta, sensitivity=not no_sensitivity,
-                                  compiled=compile_)
+                                  compiled=compile_, restore=hook)
         if as_json:
             print_json(report)
         else:

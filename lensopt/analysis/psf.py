@@ -47,8 +47,8 @@ def kernel_1d(t: Tensor, kind: str) -> Tensor:
     return torch.where(a < 1.0, k, torch.zeros_like(k))
 
 
-def _check(size: int, support: int) -> None:
-    if size < 1 or size % 2 == 0:
+def _check(size: int, support: int, allow_even: bool = False) -> None:
+    if size < 1 or (size % 2 == 0 and not allow_even):
         raise LensoptError("PSF grid size must be a positive odd number of bins", path="size", got=size)
     if support < 2 or support % 2:
         raise LensoptError("KDE support must be an even number of bins ≥ 2 (S1.4.2)", path="support", got=support)
@@ -63,6 +63,7 @@ def deposit(
     size: int,
     kernel: str = "triangular",
     support: int = 2,
+    allow_even: bool = False,
 ) -> Tensor:
     """Deposit rays on PSF grids by ray counting (``kernel="count"``) or KDE, normalized to sum 1.
 
@@ -71,16 +72,19 @@ def deposit(
         valid: (*B, P) rays that reached the image (others are scattered uniformly).
         center: (*B, 2) grid centres, mm.
         pitch: bin size, mm.
-        size: odd number of bins per side S.
+        size: odd number of bins per side S (the centre bin is centred on ``center``).
         kernel: ``count``, ``triangular`` or ``cosine``.
         support: KDE support σ in bins (even); ignored for ``count``.
+        allow_even: accept an even S: ``center`` then falls on the corner between the four middle bins.
+            For the fine grids of oversampling (``bin_down`` by an even factor restores an odd grid whose
+            centre bin is centred on ``center``).
 
     Returns:
         (*B, S, S) PSFs, each summing to 1.
     """
     if kernel == "count":
-        return ray_count(xy, valid, center, pitch=pitch, size=size)
-    return kde(xy, valid, center, pitch=pitch, size=size, kernel=kernel, support=support)
+        return ray_count(xy, valid, center, pitch=pitch, size=size, allow_even=allow_even)
+    return kde(xy, valid, center, pitch=pitch, size=size, kernel=kernel, support=support, allow_even=allow_even)
 
 
 def _bin_coords(xy: Tensor, center: Tensor, pitch: float, size: int) -> Tensor:
@@ -109,9 +113,10 @@ def _finish(grid: Tensor, rays: int) -> Tensor:
     return grid + missing / (grid.shape[-1] * grid.shape[-2])
 
 
-def ray_count(xy: Tensor, valid: Tensor, center: Tensor, *, pitch: float, size: int) -> Tensor:
+def ray_count(xy: Tensor, valid: Tensor, center: Tensor, *, pitch: float, size: int,
+              allow_even: bool = False) -> Tensor:
     """Ray counting (S1.4.1): each valid ray adds 1/P to the bin it lands in. See ``deposit``."""
-    _check(size, 2)
+    _check(size, 2, allow_even)
     u = _bin_coords(xy.detach(), center.detach(), pitch, size)
     j = torch.floor(u + 0.5).to(torch.int64)
     w = valid.to(xy.dtype)
@@ -128,10 +133,11 @@ def kde(
     size: int,
     kernel: str = "triangular",
     support: int = 2,
+    allow_even: bool = False,
 ) -> Tensor:
     """Kernel density estimate (S1.4.2) with a separable finite-support kernel; differentiable in
     ``xy`` and ``center`` (failed rays: zero weight, finite zero gradient). See ``deposit``."""
-    _check(size, support)
+    _check(size, support, allow_even)
     m = support // 2
     u = _bin_coords(xy, center, pitch, size)
     valid = valid & torch.isfinite(u).all(-1)

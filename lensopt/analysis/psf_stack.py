@@ -156,7 +156,11 @@ def compute_psfs(
     if size % 2 == 0:
         raise LensoptError("PSF grid size must be odd", path="psf.size", got=size)
     cen = center.unsqueeze(1).expand(-1, xy.shape[1], -1)
-    geo = deposit(xy, valid, cen, pitch=fine, size=size * o, kernel=settings.kernel, support=settings.support)
+    # The fine grid (S·o bins of pitch/o) tiles the S coarse bins exactly; for an even o it has an even
+    # number of bins and its centre falls on a bin corner, which ``bin_down`` turns back into the centre
+    # of the odd coarse grid.
+    geo = deposit(xy, valid, cen, pitch=fine, size=size * o, kernel=settings.kernel, support=settings.support,
+                  allow_even=True)
     psf = geo
     if field is not None:
         psf = diffraction_heuristic(geo, field) if settings.diffraction == "heuristic" else incoherent_airy(geo, field)

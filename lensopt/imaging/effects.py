@@ -13,10 +13,11 @@ __all__ = ["add_noise", "warp_distortion", "apply_relative_illumination"]
 
 
 def add_noise(image: Tensor, sigma: float, *, seed: int) -> Tensor:
-    """Additive white Gaussian noise with σ = ``sigma`` × the image maximum (S3.3.1), seeded."""
+    """Additive white Gaussian noise with σ = ``sigma`` × the image maximum (S3.3.1), seeded. The noise is
+    drawn on the CPU and moved to the image's device, so a seed gives the same noise on every device."""
     gen = torch.Generator().manual_seed(seed)
     scale = sigma * float(image.detach().max().clamp_min(0.0))
-    return image + scale * torch.randn(image.shape, generator=gen, dtype=image.dtype)
+    return image + scale * torch.randn(image.shape, generator=gen, dtype=image.dtype).to(image.device)
 
 
 def _radius_grid(image: Tensor, region: Region, sensor: Sensor) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -31,7 +32,7 @@ def apply_relative_illumination(image: Tensor, pilot: Pilot, region: Region, sen
     """Multiply each pixel by the relative illumination (S52) of the field that lands there."""
     _, _, r = _radius_grid(image, region, sensor)
     ri = pilot.at("ri", pilot.u_of_radius(r))
-    return image * torch.from_numpy(ri.astype(np.float32)).to(image.dtype)
+    return image * torch.from_numpy(ri.astype(np.float32)).to(image.device, image.dtype)
 
 
 def warp_distortion(image: Tensor, pilot: Pilot, region: Region, sensor: Sensor) -> Tensor:
@@ -51,7 +52,7 @@ def warp_distortion(image: Tensor, pilot: Pilot, region: Region, sensor: Sensor)
     row = (sensor.height / 2 - ys / sensor.pitch_mm - region.y0) * region.image_h / region.h
     gx = 2.0 * col / w - 1.0
     gy = 2.0 * row / h - 1.0
-    grid = torch.from_numpy(np.stack([gx, gy], -1).astype(np.float32))[None].to(image.dtype)
+    grid = torch.from_numpy(np.stack([gx, gy], -1).astype(np.float32))[None].to(image.device, image.dtype)
     out = torch.nn.functional.grid_sample(image[None], grid, mode="bilinear", padding_mode="border",
                                           align_corners=False)
     return out[0]

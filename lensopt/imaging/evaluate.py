@@ -31,7 +31,7 @@ from lensopt.imaging.io import linear_to_srgb
 from lensopt.imaging.metrics import psnr, ssim
 from lensopt.imaging.plan import Effects, PlanOptions
 from lensopt.imaging.regions import ring_of, stratified_draw, tile_grid
-from lensopt.imaging.simulate import plan_scene, run_plan, sensor_of
+from lensopt.imaging.simulate import PsfCache, plan_scene, run_plan, sensor_of
 
 __all__ = ["EvalItem", "Evaluation", "evaluate", "scene_source"]
 
@@ -111,6 +111,7 @@ def evaluate(
     restore: Restore | None = None,
     images: str = "",
     progress: Callable[[int, int], None] | None = None,
+    reuse_psfs: bool = True,
 ) -> Evaluation:
     """Score ``len(names)`` scenes (``scenes(k)``: ``[C, patch, patch]``) simulated through ``camera``.
 
@@ -122,6 +123,8 @@ def evaluate(
         rings: rings of relative tile radius in the breakdown.
         restore: optional restoration of each capture (see the module doc).
         progress: called with (done, total) after each scene.
+        reuse_psfs: compute each PSF stack (per set of traced fields) and each tile's PSF grid once and
+            reuse them for later scenes (``imaging.simulate.PsfCache``: the same images as recomputing).
     """
     options = options or PlanOptions()
     if not 0.0 <= noise_sigma < 1.0:
@@ -136,6 +139,7 @@ def evaluate(
     timings = {"scenes": 0.0, "simulation": 0.0, "restoration": 0.0, "metrics": 0.0}
     items: list[EvalItem] = []
     pilot = None
+    cache = PsfCache() if reuse_psfs else None
     for k in range(count):
         t0 = time.perf_counter()
         scene = scenes(k).to(torch.float32)
@@ -151,7 +155,8 @@ def evaluate(
         if k == 0:
             notes += [n for n in plan.notes if n.startswith("channel weights")]
         with torch.inference_mode():
-            out = torch.from_numpy(np.ascontiguousarray(run_plan(camera, plan, pilot, reg, sens, img, options).image))
+            sim = run_plan(camera, plan, pilot, reg, sens, img, options, cache=cache)
+            out = torch.from_numpy(np.ascontiguousarray(sim.image))
             out = out.permute(2, 0, 1)
             if noise_sigma > 0:
                 out = add_noise(out, noise_sigma, seed=int(seed) * 1_000_003 + k)
@@ -172,6 +177,9 @@ def evaluate(
             progress(k + 1, count)
     if restore is None:
         timings.pop("restoration")
+    if cache is not None and cache.hits + cache.misses:
+        notes.append(f"PSF stacks: {cache.misses} computed, reused {cache.hits} times (tiles at the same distance "
+                     "from the axis share their fields)")
     ring_rows = []
     for r in range(rings):
         sel = [it for it in items if it.ring == r]

@@ -24,7 +24,7 @@ from lensopt.imaging.psf_grid import build_psf_grid, cell_centers_mm, field_weig
 from lensopt.imaging.scene import Region, Sensor, parse_region
 from lensopt.optics.paraxial import first_order
 
-__all__ = ["SimulationResult", "plan_scene", "run_plan", "sensor_of"]
+__all__ = ["PsfCache", "SimulationResult", "plan_scene", "run_plan", "sensor_of"]
 
 
 @dataclass
@@ -35,6 +35,29 @@ class SimulationResult:
     psf_grid: torch.Tensor | None
     psfs: PsfStack | None
     timings: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class PsfCache:
+    """PSF stacks and PSF grids already computed for one lens, reused across many scenes (``evaluate``).
+
+    A stack depends only on the lens, the wavelengths, the traced fields and the PSF settings; a grid
+    also on the region (cell centres, azimuths), the channel weights and the image pixel. Tiles at the
+    same distance from the axis (mirror images, and x ↔ y on a square sensor) get the same fields, so
+    their stacks are shared; a tile drawn again reuses its grid. A hit returns the tensors that the first
+    computation made, so the images are bit-identical to recomputing them.
+    """
+
+    lens: object | None = None
+    stacks: dict[tuple, PsfStack] = field(default_factory=dict)
+    grids: dict[tuple, torch.Tensor] = field(default_factory=dict)
+    hits: int = 0
+    misses: int = 0
+
+    def bind(self, lens: object) -> None:
+        """Use the cache for ``lens`` (emptied when another lens comes)."""
+        if self.lens is not lens:
+            self.lens, self.stacks, self.grids = lens, {}, {}
 
 
 @contextmanager
@@ -78,11 +101,15 @@ def plan_scene(
 
 
 def run_plan(camera: Camera | ProvidesCamera, plan: ScenePlan, pilot: Pilot, region: Region, sensor: Sensor,
-             image: np.ndarray, options: PlanOptions, timings: dict[str, float] | None = None) -> SimulationResult:
-    """Simulate ``image`` (H, W, C linear float32) as planned."""
+             image: np.ndarray, options: PlanOptions, timings: dict[str, float] | None = None,
+             cache: PsfCache | None = None) -> SimulationResult:
+    """Simulate ``image`` (H, W, C linear float32) as planned, on the device of the camera's lens (the
+    result comes back as a NumPy array). ``cache``: reuse PSF stacks and grids of earlier scenes of the
+    same camera (``PsfCache``; same images)."""
     timings = {} if timings is None else timings
     camera = as_camera(camera)
-    out = torch.from_numpy(np.ascontiguousarray(image, dtype=np.float32)).permute(2, 0, 1).contiguous()
+    device = camera.lens.device
+    out = torch.from_numpy(np.ascontiguousarray(image, dtype=np.float32)).permute(2, 0, 1).contiguous().to(device)
     eff = plan.effects
     px_mm = plan.pixel_um * 1e-3
     if eff["distortion"]["on"]:
@@ -97,20 +124,31 @@ def run_plan(camera: Camera | ProvidesCamera, plan: ScenePlan, pilot: Pilot, reg
         settings = PsfSettings(sampling=options.sampling, kernel=options.kernel, support=options.support,
                                pitch_mm=plan.psf["pitch_um"] * 1e-3, oversample=options.oversample,
                                diffraction="heuristic" if plan.diffraction["on"] else "none", seed=options.seed)
-        with _timed(timings, "trace + PSFs"), torch.no_grad():
-            rel = torch.tensor(plan.fields_relative, dtype=lens.dtype)
-            fo = first_order(camera.lens, camera.system)
-            stack = compute_psfs(lens, system, rel, settings, fo=fo)
-        with _timed(timings, "PSF grid"), torch.no_grad():
-            radius = np.abs(stack.center[:, 1].numpy())
-            wf = torch.from_numpy(field_weights(radius, region, sensor, plan.psf_grid))
-            ww = torch.tensor(plan.channel_weights, dtype=torch.float64)
-            grid = build_psf_grid(stack.psf, ww, wf, cell_centers_mm(region, sensor, plan.psf_grid),
-                                  pitch_mm=stack.pitch_mm, pixel_mm=px_mm).to(torch.float32)
+        key = (tuple(plan.wavelength_index), tuple(plan.fields_relative), settings)
+        grid_key = (key, region, plan.psf_grid, tuple(map(tuple, plan.channel_weights)), px_mm)
+        if cache is not None:
+            cache.bind(camera.lens)
+            stack, grid = cache.stacks.get(key), cache.grids.get(grid_key)
+            cache.hits += stack is not None
+            cache.misses += stack is None
+        if stack is None:
+            with _timed(timings, "trace + PSFs"), torch.no_grad():
+                rel = torch.tensor(plan.fields_relative, dtype=lens.dtype, device=device)
+                fo = first_order(camera.lens, camera.system)
+                stack = compute_psfs(lens, system, rel, settings, fo=fo)
+        if grid is None:
+            with _timed(timings, "PSF grid"), torch.no_grad():
+                radius = np.abs(stack.center[:, 1].cpu().numpy())
+                wf = torch.from_numpy(field_weights(radius, region, sensor, plan.psf_grid)).to(device)
+                ww = torch.tensor(plan.channel_weights, dtype=torch.float64, device=device)
+                grid = build_psf_grid(stack.psf, ww, wf, cell_centers_mm(region, sensor, plan.psf_grid),
+                                      pitch_mm=stack.pitch_mm, pixel_mm=px_mm).to(torch.float32)
+        if cache is not None:
+            cache.stacks[key], cache.grids[grid_key] = stack, grid
         with _timed(timings, "convolution"):
             out = overlap_add_convolve(out, grid, overlap=plan.overlap)
     if eff["noise"]["on"]:
         with _timed(timings, "noise"):
             out = add_noise(out, eff["noise"]["sigma"], seed=eff["noise"]["seed"])
-    result = out.permute(1, 2, 0).numpy()  # a view; made contiguous by the caller if needed
+    result = out.permute(1, 2, 0).cpu().numpy()  # on the CPU a view; made contiguous by the caller if needed
     return SimulationResult(result, grid, stack, timings)

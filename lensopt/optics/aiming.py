@@ -5,10 +5,20 @@ real ray with the derivative from forward-mode autodiff.
 The shift is a relative pupil offset δ (in units of EPD/2) added to every pupil y coordinate. Newton
 runs on detached values; one final step on the attached lens makes δ exactly differentiable in the
 lens parameters at convergence (implicit function theorem), as for the asphere intersection.
+
+Decentered and tilted lenses (``lens.placement``) and two-dimensional fields: the stop centre is the
+stop surface's own vertex (its frame, ``optics.placement``), hits on the stop are measured in that
+frame, and ``chief`` aiming solves for a two-dimensional offset (δ_x, δ_y) by 2 × 2 Newton steps on
+the placed lens. ``full`` aiming of a placed lens centres the pupil ellipse on the chief ray's x
+offset and aims the meridional rays in y and the lateral (+x) ray in radius about the stop centre,
+on the placed lens: exact when the y–z plane through the chief ray stays a plane of symmetry (e.g.
+decenters in y, tilts about x, a decentered front stop), approximate otherwise (the −x side of the
+ellipse mirrors the +x side). The stop radius r is that of the centred lens.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import torch
@@ -16,10 +26,11 @@ from torch import Tensor
 
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import first_order
+from lensopt.optics.placement import surface_frames, to_local
 from lensopt.optics.sampling import launch
-from lensopt.optics.trace import trace
+from lensopt.optics.trace import RayTrace, trace
 
-__all__ = ["ChiefAim", "aim_chief", "PupilAim", "aim_full", "stop_radius"]
+__all__ = ["ChiefAim", "aim_chief", "PupilAim", "aim_full", "stop_radius", "stop_hit"]
 
 
 @dataclass(frozen=True)
@@ -31,12 +42,26 @@ class ChiefAim:
         residual_mm: (F, W) chief-ray height on the stop after aiming, mm.
         converged: (F, W) bool, residual below tolerance and the chief ray traced.
         iterations: Newton iterations used.
+        offset_x: (F, W) relative pupil x offsets δ_x for placed lenses and two-dimensional fields
+            (then ``residual_mm`` is the distance from the stop centre), else None.
     """
 
     offset: Tensor
     residual_mm: Tensor
     converged: Tensor
     iterations: int
+    offset_x: Tensor | None = None
+
+
+def stop_hit(lens: Lens, rays) -> tuple[Tensor, Tensor, RayTrace]:
+    """x, y of ``rays`` on the stop surface in the stop's own frame (global x, y for a lens without a
+    placement), and the trace up to the stop."""
+    hit = trace(lens, rays, upto=lens.stop)
+    x, y = hit.pos[..., 0], hit.pos[..., 1]
+    if lens.placement is not None:
+        frames = surface_frames(lens.thickness, lens.placement)
+        x, y, _ = to_local((x, y, hit.pos[..., 2]), frames.origin[lens.stop], frames.rotation[lens.stop])
+    return x, y, hit
 
 
 def aim_chief(
@@ -48,6 +73,7 @@ def aim_chief(
     entrance_pupil_z: Tensor,
     iterations: int = 8,
     tol_mm: float | None = None,
+    tan_field_x: Tensor | None = None,
 ) -> ChiefAim:
     """Pupil offsets that put the real chief ray of every field and wavelength on the stop centre.
 
@@ -56,7 +82,13 @@ def aim_chief(
         epd, entrance_pupil_z: paraxial entrance pupil diameter and position, mm.
         iterations: Newton iterations (fixed count; the residual is reported).
         tol_mm: convergence tolerance on the stop, default 1e3·eps·(1 + EPD).
+        tan_field_x: (F,) slopes in x of two-dimensional fields (``launch``), or None.
+
+    A placed lens (or ``tan_field_x``) is aimed in x and y (``offset_x``; see the module docstring).
     """
+    if lens.placement is not None or tan_field_x is not None:
+        return _aim_chief_2d(lens, system, tan_field, tan_field_x, epd=epd, entrance_pupil_z=entrance_pupil_z,
+                             iterations=iterations, tol_mm=tol_mm)
     num_f, num_w = tan_field.shape[0], lens.wavelength_um.shape[0]
 
     def stop_y(delta: Tensor, lens_: Lens, tan_: Tensor, epd_: Tensor, ep_z: Tensor) -> tuple[Tensor, Tensor]:
@@ -87,10 +119,64 @@ def aim_chief(
     return ChiefAim(offset=offset, residual_mm=y_det, converged=converged, iterations=iterations)
 
 
+def _aim_chief_2d(lens: Lens, system: System, tan_field: Tensor, tan_field_x: Tensor | None, *, epd: Tensor,
+                  entrance_pupil_z: Tensor, iterations: int, tol_mm: float | None) -> ChiefAim:
+    """``aim_chief`` in x and y: 2 × 2 Newton on (δ_x, δ_y), the Jacobian by two forward-mode jvps."""
+    num_f, num_w = tan_field.shape[0], lens.wavelength_um.shape[0]
+
+    def stop_xy(d: Tensor, lens_: Lens, tan_: Tensor, tanx_: Tensor | None, epd_: Tensor,
+                ep_z: Tensor) -> tuple[Tensor, Tensor]:
+        rays = launch(lens_, system, d.unsqueeze(-2), tan_, epd=epd_, entrance_pupil_z=ep_z, tan_field_x=tanx_)
+        x, y, hit = stop_hit(lens_, rays)
+        return torch.stack([x[..., 0], y[..., 0]], -1), hit.valid[..., 0]
+
+    detached = _detach_lens(lens)
+    tanx_det = None if tan_field_x is None else tan_field_x.detach()
+    args = (detached, tan_field.detach(), tanx_det, epd.detach(), entrance_pupil_z.detach())
+    delta = torch.zeros(num_f, num_w, 2, dtype=lens.dtype, device=lens.device)
+    ex, ey = torch.zeros_like(delta), torch.zeros_like(delta)
+    ex[..., 0] = 1.0
+    ey[..., 1] = 1.0
+
+    def newton_terms(d: Tensor) -> tuple[Tensor, Tensor, Tensor, tuple[Tensor, Tensor, Tensor]]:
+        """Residual (F, W, 2), Newton step J⁻¹ r (F, W, 2) and where J is invertible."""
+        fn = lambda v: stop_xy(v, *args)[0]  # noqa: E731
+        r, jx = torch.func.jvp(fn, (d,), (ex,))
+        _, jy = torch.func.jvp(fn, (d,), (ey,))
+        det = jx[..., 0] * jy[..., 1] - jy[..., 0] * jx[..., 1]
+        ok = det.abs() > 1e-24
+        safe = torch.where(ok, det, torch.ones_like(det))
+        step = torch.stack([(jy[..., 1] * r[..., 0] - jy[..., 0] * r[..., 1]) / safe,
+                            (jx[..., 0] * r[..., 1] - jx[..., 1] * r[..., 0]) / safe], -1)
+        return r, step, ok, (jx, jy, safe)
+
+    for _ in range(iterations - 1):
+        _, step, ok, _ = newton_terms(delta)
+        delta = torch.where(ok[..., None], delta - step, delta)
+    # Final step on the attached lens (detached Jacobian, attached residual): exact first derivatives.
+    r_det, _, ok, (jx, jy, safe) = newton_terms(delta)
+    r, valid = stop_xy(delta, lens, tan_field, tan_field_x, epd, entrance_pupil_z)
+    step = torch.stack([(jy[..., 1] * r[..., 0] - jy[..., 0] * r[..., 1]) / safe,
+                        (jx[..., 0] * r[..., 1] - jx[..., 1] * r[..., 0]) / safe], -1)
+    offset = torch.where(ok[..., None], delta - step, delta)
+    tol = tol_mm if tol_mm is not None else 1e3 * torch.finfo(lens.dtype).eps * (1.0 + epd.detach())
+    miss = torch.sqrt((r_det * r_det).sum(-1))
+    converged = valid & (miss <= tol)
+    return ChiefAim(offset=offset[..., 1], residual_mm=miss, converged=converged, iterations=iterations,
+                    offset_x=offset[..., 0])
+
+
 def _detach_lens(lens: Lens) -> Lens:
-    """The same lens with every tensor detached (no gradient, no forward-mode tangent)."""
+    """The same lens with every tensor detached (no gradient, no forward-mode tangent), placement too."""
     names = ("curvature", "conic", "asphere", "phase", "thickness", "index", "wavelength_um", "semi_diameter")
-    return Lens(shapes=lens.shapes, stop=lens.stop, **{n: getattr(lens, n).detach() for n in names})
+    placement = lens.placement
+    if placement is not None:
+        placement = dataclasses.replace(
+            placement, decenter=placement.decenter.detach(), tilt=placement.tilt.detach(),
+            group_decenter=None if placement.group_decenter is None else placement.group_decenter.detach(),
+            group_tilt=None if placement.group_tilt is None else placement.group_tilt.detach())
+    return Lens(shapes=lens.shapes, stop=lens.stop, placement=placement,
+                **{n: getattr(lens, n).detach() for n in names})
 
 
 # ------------------------------------------------------------------------------- full aiming (S21–S22)
@@ -135,13 +221,15 @@ class PupilAim:
 
 def stop_radius(lens: Lens, system: System, *, epd: Tensor, entrance_pupil_z: Tensor) -> Tensor:
     """() height on the stop of the real on-axis marginal ray (pupil (0, 1), reference wavelength), mm;
-    the paraxial marginal height when that ray fails."""
+    the paraxial marginal height when that ray fails. A placed lens's stop keeps its size: the radius is
+    that of the centred lens (a decentered stop would otherwise shrink by its decenter)."""
+    lens = dataclasses.replace(lens, placement=None)
     ref = system.reference
     pupil = torch.zeros(1, lens.wavelength_um.shape[0], 1, 2, dtype=lens.dtype, device=lens.device)
     pupil[..., 1] = 1.0
     tan0 = torch.zeros(1, dtype=lens.dtype, device=lens.device)
-    hit = trace(lens, launch(lens, system, pupil, tan0, epd=epd, entrance_pupil_z=entrance_pupil_z), upto=lens.stop)
-    real = hit.pos[0, ref, 0, 1].abs()
+    _, y, hit = stop_hit(lens, launch(lens, system, pupil, tan0, epd=epd, entrance_pupil_z=entrance_pupil_z))
+    real = y[0, ref, 0].abs()
     return torch.where(hit.valid[0, ref, 0], real, first_order(lens, system).stop_semi_diameter)
 
 
@@ -189,21 +277,24 @@ def aim_full(
     if chief is None:
         chief = aim_chief(lens, system, tan_field, epd=epd, entrance_pupil_z=entrance_pupil_z)
     detached = _detach_lens(lens)
-    det_args = (detached, tan_field.detach(), epd.detach(), entrance_pupil_z.detach())
-    att_args = (lens, tan_field, epd, entrance_pupil_z)
+    # A placed lens: every ray is launched beside the chief ray's x offset (the ellipse is centred on it).
+    x_off = chief.offset_x
+    det_args = (detached, tan_field.detach(), epd.detach(), entrance_pupil_z.detach(),
+                None if x_off is None else x_off.detach())
+    att_args = (lens, tan_field, epd, entrance_pupil_z, x_off)
     radius = stop_radius(lens, system, epd=epd, entrance_pupil_z=entrance_pupil_z)
     r_det = radius.detach()
 
     def stop_hits(u: Tensor, y0: Tensor, args: tuple) -> tuple[Tensor, Tensor]:
         """u: (F, W, 3) = (y_lo, y_hi, x_l), y0: (F, W) launch height of the lateral ray → stop
         coordinates (y, y, ρ) of the three rays and their validity, (F, W, 3)."""
-        lens_, tan_, epd_, ep_z = args
-        zero = torch.zeros_like(y0)
+        lens_, tan_, epd_, ep_z, x0 = args
+        zero = torch.zeros_like(y0) if x0 is None else x0
         pupil = torch.stack([torch.stack([zero, u[..., 0]], -1), torch.stack([zero, u[..., 1]], -1),
-                             torch.stack([u[..., 2], y0], -1)], -2)
-        hit = trace(lens_, launch(lens_, system, pupil, tan_, epd=epd_, entrance_pupil_z=ep_z), upto=lens_.stop)
-        rho = torch.sqrt((hit.pos[..., 2, :2] ** 2).sum(-1).clamp_min(torch.finfo(u.dtype).tiny))
-        return torch.stack([hit.pos[..., 0, 1], hit.pos[..., 1, 1], rho], -1), hit.valid
+                             torch.stack([u[..., 2] + zero, y0], -1)], -2)
+        x, y, hit = stop_hit(lens_, launch(lens_, system, pupil, tan_, epd=epd_, entrance_pupil_z=ep_z))
+        rho = torch.sqrt((x[..., 2] ** 2 + y[..., 2] ** 2).clamp_min(torch.finfo(u.dtype).tiny))
+        return torch.stack([y[..., 0], y[..., 1], rho], -1), hit.valid
 
     sign = torch.tensor([-1.0, 1.0, 1.0], dtype=lens.dtype, device=lens.device)
 
@@ -263,11 +354,12 @@ def aim_full(
             inside = held & (sign[:2] * res_fin[..., :2] <= eps_)
             res_fin = torch.cat([torch.where(inside, torch.zeros_like(inside, dtype=res_fin.dtype),
                                              res_fin[..., :2]), res_fin[..., 2:]], -1)
-        pupil = torch.stack([torch.zeros_like(y_c), chief.offset.detach()], -1).unsqueeze(-2)
-        hit = trace(detached, launch(detached, system, pupil, det_args[1], epd=det_args[2],
-                                     entrance_pupil_z=det_args[3]), upto=lens.stop)
+        px = torch.zeros_like(y_c) if det_args[4] is None else det_args[4]
+        pupil = torch.stack([px, chief.offset.detach()], -1).unsqueeze(-2)
+        _, chief_y, hit = stop_hit(detached, launch(detached, system, pupil, det_args[1], epd=det_args[2],
+                                                    entrance_pupil_z=det_args[3]))
         chief_ok = hit.valid[..., 0]
-        chief_res = torch.where(chief_ok, hit.pos[..., 0, 1], torch.zeros_like(y_c))
+        chief_res = torch.where(chief_ok, chief_y[..., 0], torch.zeros_like(y_c))
     residual = torch.cat([res_fin, chief_res.unsqueeze(-1)], -1)
     traced = torch.cat([valid_fin, chief_ok.unsqueeze(-1)], -1)
     eps = torch.finfo(lens.dtype).eps

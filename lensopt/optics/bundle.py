@@ -71,8 +71,10 @@ def pupil_shape(
     aim: str,
     aim_steps: int = 1,
     vignetting: Tensor | None = None,
+    tan_field_x: Tensor | None = None,
 ) -> PupilShape:
-    """Aim, apply fixed factors ``vignetting`` ((F, W|1, 3) or None), cut by the front aperture."""
+    """Aim, apply fixed factors ``vignetting`` ((F, W|1, 3) or None), cut by the front aperture.
+    ``tan_field_x``: x slopes of two-dimensional fields (chief aiming only)."""
     if aim not in AIM_MODES:
         raise ValueError(f"aim must be one of {AIM_MODES}, got {aim!r}")
     num_f, num_w = tan_field.shape[0], lens.wavelength_um.shape[0]
@@ -80,7 +82,7 @@ def pupil_shape(
     chief = full = blocked = None
     factors: Tensor | None = None
     if aim in ("chief", "full"):
-        chief = aim_chief(lens, system, tan_field, **opts)
+        chief = aim_chief(lens, system, tan_field, tan_field_x=tan_field_x, **opts)
         zero = torch.zeros_like(chief.offset)
         factors = ellipse_to_factors(chief.offset, 1.0 + zero, 1.0 + zero)
     fa = system.front_aperture
@@ -164,7 +166,7 @@ def trace_bundle(
         shape: the pupil shape already computed by ``pupil_shape`` for these fields (saves aiming
             again when several bundles share fields); ``aim``/``vignetting`` are then not used.
         rel_field_x: (F,) relative fields in x (two-dimensional fields, for lenses that are not
-            rotationally symmetric), scaled like ``rel_field``; needs ``aim = none``.
+            rotationally symmetric), scaled like ``rel_field``; needs ``aim`` ``none`` or ``chief``.
         backend: ``auto``, ``eager`` or ``compiled`` (``optics.backend``); default: ``use_backend``'s.
 
     A lens with a placement (decentered or tilted surfaces) has no mirror symmetry: a half-pupil
@@ -178,8 +180,8 @@ def trace_bundle(
     mode = system.aim if aim is None else aim
     tan_x = None
     if rel_field_x is not None:
-        if mode != "none":
-            raise ValueError("two-dimensional fields (rel_field_x) are traced with aim = none only")
+        if mode == "full":
+            raise ValueError("two-dimensional fields (rel_field_x) are traced with aim = none or chief")
         tan_x = field_tangents(lens, system, rel_field_x.to(lens.dtype))
     pupil = pupil.to(dtype=lens.dtype, device=lens.device)
     if lens.placement is not None and half_pupil:  # no symmetry: the mirrored half too
@@ -194,9 +196,13 @@ def trace_bundle(
         vignetting = torch.tensor(system.vignetting, dtype=lens.dtype, device=lens.device).unsqueeze(1)
     if shape is None:
         shape = pupil_shape(lens, system, tan, fo, aim=mode, vignetting=vignetting,
-                            aim_steps=system.aim_steps if aim_steps is None else aim_steps)
+                            aim_steps=system.aim_steps if aim_steps is None else aim_steps, tan_field_x=tan_x)
     if shape.factors is not None:
         pupil = apply_vignetting(pupil, shape.factors)
+    if shape.chief is not None and shape.chief.offset_x is not None:
+        # Placed lenses and 2-D fields: the chief-aimed pupil moves in x too (``aiming``).
+        shift = torch.stack([shape.chief.offset_x, torch.zeros_like(shape.chief.offset_x)], -1)
+        pupil = pupil + shift[:, :, None]
     rays = launch(lens, system, pupil, tan, epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z, tan_field_x=tan_x)
     result = trace_with(lens, rays, record=record, backend=backend)
     fa = system.front_aperture

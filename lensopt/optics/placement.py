@@ -23,7 +23,11 @@ Conventions (as CODE V's DEC/ADE/BDE and Zemax's coordinate break with order fla
 The image surface keeps the axis frame after the last gap; the trace reports image positions in that
 frame's own x, y (a detector's coordinates), so that a ``basic`` decenter moves the detector along.
 
-Paraxial (first-order) data ignore the placement: they describe the nominal lens.
+Paraxial (first-order) data ignore the placement: they describe the centred lens (entrance pupil
+position and diameter of the launch, EFL, f-numbers, paraxial image heights). Decenters and tilts
+change first-order properties only in second order; their first-order effect (image shift and tilt)
+is in the real trace. Chief-ray aiming (``optics.aiming``) does honour the placement: it aims at the
+stop surface's own vertex, in x and y.
 """
 
 from __future__ import annotations

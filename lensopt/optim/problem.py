@@ -16,7 +16,7 @@ import torch
 from torch import Tensor
 
 from lensopt.analysis.spot import spot_stats
-from lensopt.errors import LensoptError
+from lensopt.errors import LensoptError, SpecError
 from lensopt.materials import design_catalog
 from lensopt.materials.glass_space import GlassMesh, GlassSpace, glass_mesh, glass_space
 from lensopt.optics.bundle import Bundle, trace_bundle
@@ -114,6 +114,7 @@ class Problem:
             or (s > 0 and "material" in self.spec.surfaces[s - 1].vary)
         ]
         self.failure_penalty = cons.ray_failure.penalty_mm or alpha
+        self.path_spans = self._path_spans()
         self.theta0 = self.param.initial()
         if self.objective in ("raw", "restored"):  # "restored": optim.joint replaces it with RestoredObjective
             mode = "scalar" if (method or self.opt.optimizer) == "adam" else "gtra"
@@ -181,6 +182,28 @@ class Problem:
             lo.append(low)
             hi.append(high)
         return torch.stack(lo), torch.stack(hi)
+
+    def _path_spans(self) -> list[tuple[int, int, float, float]]:
+        """``ray_path.spans`` as (first surface, end surface, lower, upper); the image is surface S."""
+        rp = self.opt.constraints.ray_path
+        S = len(self.spec.surfaces)
+        out = []
+        for i, sp in enumerate((rp.spans if rp is not None else None) or []):
+            path = f"optimize.constraints.ray_path.spans[{i}]"
+            if not -S <= sp.first < S:
+                raise SpecError(f"no such surface (the lens has {S})", path=f"{path}.first", got=sp.first)
+            first = sp.first % S
+            stop = S if sp.to is None else sp.to
+            if sp.to is not None and not -S <= sp.to < S:
+                raise SpecError(f"no such surface (the lens has {S}; leave `to` out for the image)",
+                                path=f"{path}.to", got=sp.to)
+            stop = stop % S if sp.to is not None else S
+            if stop <= first:
+                raise SpecError("`to` must come after `first`", path=f"{path}.to", got=sp.to)
+            lo = -residuals.BIG if sp.min is None else sp.min
+            hi = residuals.BIG if sp.max is None else sp.max
+            out.append((first, stop, lo, hi))
+        return out
 
     # ----------------------------------------------------------------------------------- residuals
 

@@ -23,6 +23,7 @@ __all__ = [
     "tra",
     "gap_lengths",
     "ray_path",
+    "ray_path_spans",
     "ray_angle",
     "surface_normal",
     "distortion",
@@ -70,6 +71,19 @@ def ray_path(bundle: Bundle, lower: Tensor, upper: Tensor) -> Tensor:
     d = _ramp(torch.maximum(tz - hi, lo - tz))
     d = torch.where(bundle.result.valid.unsqueeze(0), d, 0.0)
     return d.reshape(-1) / math.sqrt(bundle.result.status.numel())
+
+
+def ray_path_spans(bundle: Bundle, spans: list[tuple[int, int, float, float]]) -> Tensor:
+    """(K n_r,) ray path residuals on runs of gaps: for each span (first, stop, lower, upper) the axial
+    distance t = Σ t_z over the gaps first … stop − 1 (surface ``first`` to surface ``stop``, the image
+    being surface S) must lie in [lower, upper]; rows ramp(max(t − upper, lower − t))/√n_r."""
+    tz = gap_lengths(bundle)
+    valid = bundle.result.valid
+    out = [torch.where(valid, _ramp(torch.maximum(tz[a:b].sum(0) - hi, lo - tz[a:b].sum(0))), 0.0)
+           for a, b, lo, hi in spans]
+    if not out:
+        return tz.new_zeros(0)
+    return torch.stack(out).reshape(-1) / math.sqrt(bundle.result.status.numel())
 
 
 def ray_angle(bundle: Bundle, surfaces: list[int], max_deg: float) -> Tensor:

@@ -15,6 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+import torch
 from torch import Tensor
 
 from lensopt.analysis.spot import SpotStats
@@ -111,9 +112,16 @@ register_term(Term(
     lambda p: p.opt.tra.weight if p.objective == "spot" else None,
     lambda c: res.tra(c.spot, c.stats, c.problem.system.wavelength_weights, c.problem.field_weights),
     lambda p: p.opt.tra))
+def _ray_path(c: TermContext) -> Tensor:
+    r = res.ray_path(c.bundle, *c.problem.gap_bounds(c.lens))
+    if not c.problem.path_spans:
+        return r
+    return torch.cat([r, res.ray_path_spans(c.bundle, c.problem.path_spans)])
+
+
 register_term(Term(
-    "ray_path", "axial ray path per gap within its bounds (S41–S42)", _cons_weight("ray_path"),
-    lambda c: res.ray_path(c.bundle, *c.problem.gap_bounds(c.lens)), _cons("ray_path")))
+    "ray_path", "axial ray path per gap (and per span of gaps) within its bounds (S41–S42)",
+    _cons_weight("ray_path"), _ray_path, _cons("ray_path")))
 register_term(Term(
     "ray_angle", "angles of incidence and refraction (S43–S45)", _cons_weight("ray_angle"),
     lambda c: res.ray_angle(c.bundle, c.problem.interfaces, c.problem.opt.constraints.ray_angle.max_deg),

@@ -12,23 +12,29 @@ __all__ = ["cdf_figure", "histogram_figure", "sensitivity_figure"]
 
 
 def cdf_figure(values: np.ndarray, *, metric: str, nominal: float, title: str,
-               predicted: tuple[float, float] | None = None) -> Figure:
+               predicted: tuple[float, float] | None = None, higher_is_better: bool = False) -> Figure:
     """Empirical cumulative probability of ``values`` (finite ones), nominal marked; ``predicted``
-    (mean, std) draws the normal CDF of the RSS prediction."""
+    (mean, std) draws the normal CDF of the RSS prediction. ``higher_is_better`` (MTF, PSNR): the
+    probability of at least the value (the yield), P(metric ≥ x), instead of P(metric ≤ x)."""
     fig = new_figure(5.5, 3.8)
     ax = fig.add_subplot()
     v = np.sort(values[np.isfinite(values)])
     p = np.arange(1, v.size + 1) / max(v.size, 1)
-    ax.step(v, 100 * p, where="post", color="#0072B2", lw=1.4, label=f"Monte Carlo ({values.size} trials)")
+    if higher_is_better:  # P(metric ≥ v_i) = (n − i) / n for the sorted v_i (i from 0)
+        p = (v.size - np.arange(v.size)) / max(v.size, 1)
+    ax.step(v, 100 * p, where="pre" if higher_is_better else "post", color="#0072B2", lw=1.4,
+            label=f"Monte Carlo ({values.size} trials)")
     ax.axvline(nominal, color="0.3", ls="--", lw=0.8, label="nominal (compensated)")
     if predicted is not None and predicted[1] > 0:
         from math import erf, sqrt
 
         x = np.linspace(v.min() if v.size else nominal, v.max() if v.size else nominal + 1, 200)
         cdf = [50 * (1 + erf((xi - predicted[0]) / (predicted[1] * sqrt(2)))) for xi in x]
+        if higher_is_better:
+            cdf = [100 - c for c in cdf]
         ax.plot(x, cdf, color="#D55E00", lw=1.0, ls=":", label="RSS prediction (normal)")
     ax.set_xlabel(metric)
-    ax.set_ylabel("cumulative probability (%)")
+    ax.set_ylabel("probability of at least (%)" if higher_is_better else "cumulative probability (%)")
     ax.set_ylim(0, 100)
     ax.grid(True, lw=0.3, alpha=0.6)
     ax.legend(fontsize=7, loc="lower right")

@@ -15,6 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 __all__ = [
     "SolveSpec",
     "GapBoundSpec",
+    "SpanBoundSpec",
     "TraSpec",
     "RayPathSpec",
     "RayAngleSpec",
@@ -111,12 +112,31 @@ class GapBoundSpec(_Model):
     max: float | None = None
 
 
+class SpanBoundSpec(_Model):
+    """Ray-path bounds on a run of consecutive gaps: the axial distance each ray travels from its hit on
+    surface ``first`` to its hit on surface ``to`` (0-based; negative counts from the end; ``to`` left
+    out: the image). E.g. a mechanical flange distance from the last lens surface to the sensor across
+    an IR filter: ``{ first = 10, min = 5.1 }``."""
+
+    first: int
+    to: int | None = None
+    min: float | None = None
+    max: float | None = None
+
+    @model_validator(mode="after")
+    def _some_bound(self) -> SpanBoundSpec:
+        if self.min is None and self.max is None:
+            raise ValueError("@min: a span needs a min or a max (mm)")
+        return self
+
+
 class RayPathSpec(_Weighted):
     """Ray path residuals (S41–S42) on the axial distance t_z each ray travels in every gap, mm.
 
     Glass gaps: ``max(glass_min, CT/glass_ratio) ≤ t_z ≤ min(glass_max, glass_ratio·CT)`` with CT the
     centre thickness. Air gaps: ``air_min ≤ t_z ≤ air_max``. The last gap (to the image) uses
-    ``image_min``/``image_max`` (image clearance) instead. ``gaps`` override single gaps.
+    ``image_min``/``image_max`` (image clearance) instead. ``gaps`` override single gaps; ``spans``
+    bound the sum over several consecutive gaps (e.g. a flange distance across a filter), as extra rows.
     """
 
     glass_min: float = 0.0
@@ -127,6 +147,7 @@ class RayPathSpec(_Weighted):
     image_min: float | None = 0.0
     image_max: float | None = None
     gaps: list[GapBoundSpec] = Field(default_factory=list)
+    spans: list[SpanBoundSpec] | None = None  # None (not []): absent from written lenses
 
 
 class RayAngleSpec(_Weighted):

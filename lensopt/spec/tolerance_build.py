@@ -16,6 +16,8 @@ from typing import Any
 
 import torch
 
+from lensopt.errors import LensoptError
+from lensopt.optics.sampling import PupilSampling
 from lensopt.spec.build import Model
 from lensopt.spec.models import LensSpec
 from lensopt.tolerance.model import ARCMIN, Tolerance, TrialParams, elements_of
@@ -25,9 +27,38 @@ from lensopt.tolerance.setup import make_job as _make_job
 __all__ = ["make_job", "lm_variables", "trial_spec"]
 
 
-def make_job(model: Model, settings: Any, tols: list[Tolerance] | None = None) -> Job:
-    """The tolerance ``Job`` of a built spec and its ``ToleranceSpec`` settings."""
-    return _make_job(model.lens, model.system, model.media, settings, lm_vars=lm_variables(model), tols=tols)
+def make_job(model: Model, settings: Any, tols: list[Tolerance] | None = None, *, restore: Any = None) -> Job:
+    """The tolerance ``Job`` of a built spec and its ``ToleranceSpec`` settings; ``restore``: the
+    restoration hook of the ``psnr`` metric (``imaging.evaluate``'s, e.g. ``cli_restore.irm_hook``)."""
+    job = _make_job(model.lens, model.system, model.media, settings, lm_vars=lm_variables(model), tols=tols)
+    if settings.metric != "psnr":
+        if restore is not None:
+            raise LensoptError("a restoration network is used by the psnr metric only", path="--irm",
+                               got=settings.metric)
+        return job
+    if job.setup.placement is not None:
+        raise LensoptError("the psnr metric images through the rotationally symmetric simulation path: "
+                           "decenter/tilt tolerances and decentered lenses are not supported with it",
+                           path="tolerance.metric", got="psnr")
+    from lensopt.imaging.regions import tile_grid
+    from lensopt.imaging.simulate import sensor_of
+    from lensopt.spec.build import camera_of
+    from lensopt.tolerance.evaluate import evaluate
+    from lensopt.tolerance.psnr import PsnrSetup
+
+    # Settings errors are reported here, once (a trial whose imaging fails scores −inf instead).
+    PupilSampling.parse(settings.psnr_sampling, path="tolerance.psnr_sampling")
+    camera = camera_of(model)
+    tile_grid(sensor_of(camera, settings.psnr_patch, settings.psnr_patch)[0], settings.psnr_patch,
+              option="tolerance.psnr_patch")
+    with torch.no_grad():
+        nominal = evaluate(job.setup, job.params(torch.zeros(1, len(job.tols), dtype=torch.float64)))
+    lm_ref = tuple(float(v) for v in nominal["lm_offsets"][0]) if "lm_offsets" in nominal else None
+    psnr = PsnrSetup(camera, count=settings.psnr_count, patch=settings.psnr_patch, seed=settings.seed,
+                     sampling=settings.psnr_sampling, noise_sigma=settings.psnr_noise, restore=restore,
+                     focus_reference=float(nominal["focus_shift"][0]), lm_reference=lm_ref,
+                     lm_vars=job.setup.lm_vars)
+    return dataclasses.replace(job, psnr=psnr)
 
 
 def lm_variables(model: Model) -> tuple[tuple[str, int], ...]:

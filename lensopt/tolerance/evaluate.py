@@ -30,7 +30,7 @@ from torch import Tensor
 from lensopt.analysis.spot import safe_sqrt
 from lensopt.optics.bundle import Bundle, trace_bundle
 from lensopt.optics.lens import Lens, System
-from lensopt.optics.paraxial import chief_image_height
+from lensopt.optics.paraxial import chief_image_height, field_tangents
 from lensopt.optics.placement import Placement
 from lensopt.tolerance.model import TrialParams, params_lens
 
@@ -56,6 +56,14 @@ class EvalSetup:
             re-optimized per trial by ``lm_steps`` Levenberg–Marquardt steps on the ESR (the back focus
             still solved in closed form inside every evaluation).
         lm_steps: LM steps per trial.
+        field_xy: (F, 2) two-dimensional relative fields (x, y), or None: the system's +y fields. The
+            pupil samples of field (x, y) are those of the +y field turned by the field's azimuth (so a
+            rotationally symmetric lens gives the same spot, turned, at every azimuth); ``pupil`` must
+            then be the full pupil (``half`` False).
+        field_weights: (F,) weights of ``field_xy`` in the ESR (None: uniform).
+        aim: ``none`` (every trial fills the nominal paraxial entrance pupil) or ``chief`` (each trial's
+            chief rays aimed at the centre of its own, possibly decentered or tilted, stop, in x and y;
+            ``optics.aiming``).
     """
 
     lens: Lens
@@ -68,6 +76,9 @@ class EvalSetup:
     mtf_frequency: float | None = None
     lm_vars: tuple[tuple[str, int], ...] = ()
     lm_steps: int = 5
+    field_xy: Tensor | None = None
+    field_weights: tuple[float, ...] | None = None
+    aim: str = "none"
 
 
 def _centroid(u: Tensor, w: Tensor, half: bool) -> Tensor:
@@ -116,11 +127,41 @@ def _spot(xy: Tensor, valid: Tensor, ww: Tensor, fw: Tensor, half: bool) -> tupl
     return rms, esr, c
 
 
-def _weights(system: System, lens: Lens, num_fields: int) -> tuple[Tensor, Tensor]:
+def _weights(setup: EvalSetup, lens: Lens, num_fields: int) -> tuple[Tensor, Tensor]:
+    system = setup.system
     ww = system.wavelength_weights.to(lens.dtype)
-    fw = (torch.tensor(system.field_weights, dtype=lens.dtype, device=lens.device) if system.field_weights
+    given = setup.field_weights if setup.field_xy is not None else system.field_weights
+    fw = (torch.tensor(given, dtype=lens.dtype, device=lens.device) if given
           else torch.ones(num_fields, dtype=lens.dtype, device=lens.device))
     return ww, fw
+
+
+def _azimuth(lens: Lens, system: System, field_xy: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    """Object-space slopes (tan θ_x, tan θ_y) (F,) each and the unit field direction (F, 2) (+y for
+    the axis)."""
+    fxy = field_xy.to(lens.dtype)
+    tx, ty = field_tangents(lens, system, fxy[:, 0]), field_tangents(lens, system, fxy[:, 1])
+    norm = torch.sqrt(tx * tx + ty * ty)
+    on_axis = norm == 0
+    safe = torch.where(on_axis, 1.0, norm)
+    sx = torch.where(on_axis, 0.0, tx / safe)
+    sy = torch.where(on_axis, 1.0, ty / safe)
+    return tx, ty, torch.stack([sx, sy], -1)
+
+
+def _trace(setup: EvalSetup, lens: Lens) -> tuple[Bundle, Tensor | None]:
+    """The trial's bundle; for two-dimensional fields also the unit field directions (F, 2)."""
+    if setup.field_xy is None:
+        return trace_bundle(lens, setup.system, setup.pupil, half_pupil=setup.half, aim=setup.aim), None
+    _, _, s = _azimuth(lens, setup.system, setup.field_xy)
+    px, py = setup.pupil[:, 0].to(lens.dtype), setup.pupil[:, 1].to(lens.dtype)
+    sx, sy = s[:, 0:1], s[:, 1:2]
+    # Turn the pupil with the field: (0, 1) → (sx, sy), (1, 0) → (sy, −sx).
+    pupil = torch.stack([px * sy + py * sx, -px * sx + py * sy], -1)[:, None]  # (F, 1, P, 2)
+    fxy = setup.field_xy.to(lens.dtype)
+    b = trace_bundle(lens, setup.system, pupil, half_pupil=False, aim=setup.aim, rel_field=fxy[:, 1],
+                     rel_field_x=fxy[:, 0])
+    return b, s
 
 
 def _with_offsets(setup: EvalSetup, p: dict[str, Tensor], theta: Tensor) -> dict[str, Tensor]:
@@ -139,8 +180,8 @@ def _with_offsets(setup: EvalSetup, p: dict[str, Tensor], theta: Tensor) -> dict
 def _lm_residuals(setup: EvalSetup, p: dict[str, Tensor], theta: Tensor) -> Tensor:
     """Weighted ray deviations from the field centroids after the closed-form refocus: ‖r‖² = ESR²."""
     lens = params_lens(setup.lens, setup.placement, _with_offsets(setup, p, theta))
-    b = trace_bundle(lens, setup.system, setup.pupil, half_pupil=setup.half, aim="none")
-    ww, fw = _weights(setup.system, lens, b.rel_field.shape[0])
+    b, _ = _trace(setup, lens)
+    ww, fw = _weights(setup, lens, b.rel_field.shape[0])
     _, _, xy = refocus(b, ww, fw, b.half_pupil, setup.focus_range)
     valid = b.result.valid
     w = ww[None, :, None] * valid.to(xy.dtype)
@@ -190,9 +231,9 @@ def _one(setup: EvalSetup, p: dict[str, Tensor]) -> dict[str, Tensor]:
         p, lm_ok, lm_theta = _lm(setup, p)
     lens = params_lens(setup.lens, setup.placement, p)
     system = setup.system
-    b = trace_bundle(lens, system, setup.pupil, half_pupil=setup.half, aim="none")
+    b, direction = _trace(setup, lens)
     half = b.half_pupil
-    ww, fw = _weights(system, lens, b.rel_field.shape[0])
+    ww, fw = _weights(setup, lens, b.rel_field.shape[0])
     valid = b.result.valid
     if setup.compensate in ("focus", "lm"):
         dz, ok, xy = refocus(b, ww, fw, half, setup.focus_range)
@@ -214,21 +255,45 @@ def _one(setup: EvalSetup, p: dict[str, Tensor]) -> dict[str, Tensor]:
         "failed_rays": (~valid).sum(),
     }
     # Distortion at the outermost field: centroid height against the paraxial chief-ray height, %.
-    y_par = chief_image_height(lens, system, b.tan_field, ep_z=b.first_order.entrance_pupil_z)
-    out["distortion"] = 100.0 * (centroid[-1, 1] - y_par[-1]) / y_par[-1]
+    ep_z = b.first_order.entrance_pupil_z
+    if setup.field_xy is None:
+        y_par = chief_image_height(lens, system, b.tan_field, ep_z=ep_z)
+        out["distortion"] = 100.0 * (centroid[-1, 1] - y_par[-1]) / y_par[-1]
+    else:
+        out["distortion"] = _distortion_2d(setup, lens, centroid, ep_z)
     if lm_theta is not None:
         out["lm_offsets"] = lm_theta
     if setup.mtf_frequency is not None:
-        out["mtf_s"], out["mtf_t"] = _mtf(lens, b, xy, valid, ww, centroid, setup.mtf_frequency, half)
+        out["mtf_s"], out["mtf_t"] = _mtf(lens, b, xy, valid, ww, centroid, setup.mtf_frequency, half, direction)
     return out
 
 
+def _distortion_2d(setup: EvalSetup, lens: Lens, centroid: Tensor, ep_z: Tensor) -> Tensor:
+    """Radial distortion (%) of the outermost two-dimensional field with the largest |distortion|: the
+    centroid's component along the paraxial image point p = (y_p(tan θ_x), y_p(tan θ_y)) (the paraxial
+    chief-ray height is linear in the slope) against |p|."""
+    tx, ty, _ = _azimuth(lens, setup.system, setup.field_xy)
+    p = torch.stack([chief_image_height(lens, setup.system, tx, ep_z=ep_z),
+                     chief_image_height(lens, setup.system, ty, ep_z=ep_z)], -1)  # (F, 2)
+    radius = torch.linalg.vector_norm(setup.field_xy.to(torch.float64), dim=-1)
+    outer = [i for i, r in enumerate(radius.tolist()) if r >= float(radius.max()) - 1e-12]
+    p2 = (p[outer] ** 2).sum(-1)
+    off_axis = p2 > 0  # only the axis given: no distortion to speak of (0, not NaN)
+    safe = torch.where(off_axis, p2, 1.0)
+    d = torch.where(off_axis, 100.0 * ((centroid[outer] * p[outer]).sum(-1) - p2) / safe, 0.0)
+    return torch.gather(d, 0, torch.argmax(d.abs(), dim=0, keepdim=True))[0]
+
+
 def _mtf(lens: Lens, b: Bundle, xy: Tensor, valid: Tensor, ww: Tensor, centroid: Tensor, nu: float,
-         half: bool) -> tuple[Tensor, Tensor]:
+         half: bool, direction: Tensor | None = None) -> tuple[Tensor, Tensor]:
     """(F,) sagittal and tangential MTF at ``nu`` cycles/mm: the geometric OTF of the (refocused)
     intercepts times the diffraction-limited pupil MTF per wavelength (``analysis.mtf``'s heuristic, with
-    the working f-number as a tensor so that it runs under vmap)."""
+    the working f-number as a tensor so that it runs under vmap). ``direction``: (F, 2) unit field
+    directions of two-dimensional fields (tangential: along it, sagittal: across it), None: +y."""
     d = xy - centroid[:, None, None]
+    if direction is not None:
+        sx, sy = direction[:, None, None, 0], direction[:, None, None, 1]
+        d = torch.stack([d[..., 0] * sy - d[..., 1] * sx, d[..., 0] * sx + d[..., 1] * sy], -1)
     m = valid.to(xy.dtype)
     count = m.sum(-1).clamp_min(1.0)
     wn = b.first_order.working_fnumber.abs()

@@ -17,14 +17,16 @@ import torch
 from torch import Tensor
 
 from lensopt.optics.lens import Lens, System
+from lensopt.parallel import run_tasks
 from lensopt.tolerance.evaluate import EvalSetup, evaluate
 from lensopt.tolerance.model import Tolerance, TrialParams, draw, perturb
+from lensopt.tolerance.psnr import PsnrSetup, trial_lens, trial_psnr
 
 __all__ = ["Job", "run_trials", "sensitivity", "monte_carlo", "yield_table", "rss_prediction", "scalar_metric",
            "LEVELS", "HIGHER_IS_BETTER", "MonteCarlo", "SensitivityRow", "moments", "nominal_metrics"]
 
 LEVELS = (0.5, 0.8, 0.9, 0.95, 0.99)
-HIGHER_IS_BETTER = {"esr": False, "rms": False, "mtf": True, "distortion": False}
+HIGHER_IS_BETTER = {"esr": False, "rms": False, "mtf": True, "distortion": False, "psnr": True}
 
 
 @dataclass(frozen=True)
@@ -38,6 +40,7 @@ class Job:
         semi_aperture: (S,) semi-apertures, mm (fringes).
         metric: the metric of the yield table and the sensitivities: esr, rms, mtf or distortion.
         chunk: trials per vmapped call.
+        psnr: imaging of every trial for the ``psnr`` metric (``tolerance.psnr``), or None.
         compiled: run the vmapped evaluation under ``torch.compile`` (one compilation per process and
             chunk size, minutes on a loaded 2-core machine; then ~3× faster per trial at rings:24). The
             last chunk is padded to the chunk size so that it does not compile again.
@@ -50,6 +53,7 @@ class Job:
     metric: str = "esr"
     chunk: int = 25
     compiled: bool = False
+    psnr: PsnrSetup | None = None
 
     @property
     def lens(self) -> Lens:
@@ -64,8 +68,8 @@ class Job:
 
 
 def scalar_metric(out: dict[str, np.ndarray], metric: str) -> np.ndarray:
-    """(K,) one number per trial: ESR (µm), worst-field RMS (µm), worst MTF over fields and S/T, or
-    |distortion| at the full field (%)."""
+    """(K,) one number per trial: ESR (µm), worst-field RMS (µm), worst MTF over fields and S/T,
+    |distortion| at the full field (%), or PSNR (dB; after restoration when a network is given)."""
     if metric == "esr":
         return out["esr"] * 1e3
     if metric == "rms":
@@ -76,6 +80,10 @@ def scalar_metric(out: dict[str, np.ndarray], metric: str) -> np.ndarray:
         return np.minimum(out["mtf_s"], out["mtf_t"]).min(-1)
     if metric == "distortion":
         return np.abs(out["distortion"])
+    if metric == "psnr":
+        if "psnr_pre" not in out:
+            raise ValueError("the psnr metric needs the imaging setup (Job.psnr)")
+        return out["psnr_post"] if "psnr_post" in out else out["psnr_pre"]
     raise ValueError(f"metric must be one of {tuple(HIGHER_IS_BETTER)}, got {metric!r}")
 
 
@@ -95,7 +103,19 @@ def _chunk_eval(job: Job, values: Tensor) -> dict[str, np.ndarray]:
             out = fn(job.params(values))
         else:
             out = evaluate(job.setup, job.params(values))
-    return {name: v[:k].cpu().numpy() for name, v in out.items()}
+    res = {name: v[:k].cpu().numpy() for name, v in out.items()}
+    if job.psnr is not None:
+        res.update(_chunk_psnr(job, values[:k], res))
+    return res
+
+
+def _chunk_psnr(job: Job, values: Tensor, res: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """PSNR of every trial of a chunk (a loop over trials: image simulation is not batched)."""
+    params = job.params(values)
+    lenses = [trial_lens(job.lens, job.setup.placement, params.select(slice(i, i + 1)), float(res["focus_shift"][i]),
+                         res["lm_offsets"][i] if "lm_offsets" in res else None, job.psnr)
+              for i in range(values.shape[0])]
+    return trial_psnr(job.psnr, lenses)
 
 
 def run_trials(job: Job, values: Tensor, *, scheduler: str | None = None, workers: int = 2) -> dict[str, np.ndarray]:
@@ -106,30 +126,8 @@ def run_trials(job: Job, values: Tensor, *, scheduler: str | None = None, worker
             ``workers`` single-threaded worker processes) or a scheduler address (``tcp://…``).
     """
     chunks = [values[i:i + job.chunk] for i in range(0, values.shape[0], job.chunk)]
-    if scheduler is None:
-        parts = [_chunk_eval(job, c) for c in chunks]
-    else:
-        parts = _run_dask(job, chunks, scheduler, workers)
+    parts = run_tasks(_chunk_eval, chunks, shared=job, scheduler=scheduler, workers=workers)
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-
-
-def _run_dask(job: Job, chunks: list[Tensor], scheduler: str, workers: int) -> list[dict[str, np.ndarray]]:
-    from distributed import Client, LocalCluster
-
-    cluster = None
-    if scheduler == "local":
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
-        client = Client(cluster)
-    else:
-        client = Client(scheduler)
-    try:
-        job_f = client.scatter(job, broadcast=True)
-        futures = [client.submit(_chunk_eval, job_f, c, pure=False) for c in chunks]
-        return client.gather(futures)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
 
 
 # --------------------------------------------------------------------------------- sensitivity
@@ -229,11 +227,14 @@ def moments(distribution: str, limit: float) -> tuple[float, float]:
     return sigma**2 * (1 - 2 * c * phi / z), sigma**4 * (3 - 2 * (c**3 + 3 * c) * phi / z)
 
 
-def rss_prediction(rows: list[SensitivityRow], tols: tuple[Tolerance, ...], m0: float) -> dict[str, float]:
+def rss_prediction(rows: list[SensitivityRow], tols: tuple[Tolerance, ...], m0: float, *,
+                   higher_is_better: bool = False) -> dict[str, float]:
     """Predicted distribution of the metric from the sensitivities (independent errors).
 
     Statistical: with Δ_i(x) = b_i x + q_i x², mean = m0 + Σ q_i E[x²], variance =
-    Σ b_i² E[x²] + q_i² (E[x⁴] − E[x²]²). Classical RSS: m0 + sqrt(Σ max(|Δ−|, |Δ+|)²).
+    Σ b_i² E[x²] + q_i² (E[x⁴] − E[x²]²). Classical RSS: m0 + sqrt(Σ max(|Δ−|, |Δ+|)²) (m0 − … when
+    higher is better). ``p50`` … ``p99``: the value that that fraction of lenses meets under a normal
+    law (at most it; at least it when higher is better, as the yield table).
     """
     by_name = {t.name: t for t in tols}
     mean, var, rss = m0, 0.0, 0.0
@@ -243,8 +244,9 @@ def rss_prediction(rows: list[SensitivityRow], tols: tuple[Tolerance, ...], m0: 
         var += r.linear**2 * e2 + r.quadratic**2 * (e4 - e2 * e2)
         rss += r.worst**2
     std = math.sqrt(max(var, 0.0))
-    return {"nominal": m0, "mean": mean, "std": std, "rss_worst": m0 + math.sqrt(rss),
-            **{f"p{int(p * 100)}": mean + _z(p) * std for p in LEVELS}}
+    sign = -1.0 if higher_is_better else 1.0
+    return {"nominal": m0, "mean": mean, "std": std, "rss_worst": m0 + sign * math.sqrt(rss),
+            **{f"p{int(p * 100)}": mean + sign * _z(p) * std for p in LEVELS}}
 
 
 def _z(p: float) -> float:

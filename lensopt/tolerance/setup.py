@@ -22,7 +22,7 @@ from lensopt.tolerance.evaluate import EvalSetup
 from lensopt.tolerance.model import KINDS, Tolerance, elements_of, glass_gaps, nominal_params, s62_profile
 from lensopt.tolerance.run import Job
 
-__all__ = ["tolerances_for", "make_job", "semi_apertures", "d_line_indices"]
+__all__ = ["tolerances_for", "make_job", "semi_apertures", "d_line_indices", "field_points"]
 
 D_LINE_UM = 0.5875618
 
@@ -102,6 +102,25 @@ def semi_apertures(lens: Lens, system: System) -> torch.Tensor:
     return torch.tensor(out, dtype=lens.dtype)
 
 
+def field_points(system: System, fields: Any) -> tuple[list[tuple[float, float]], tuple[float, ...]] | None:
+    """Two-dimensional relative fields (x, y) and their ESR weights for ``fields`` (``ToleranceSpec.fields``):
+    None for ``y`` (the system's +y fields); ``xy``: every system field h at (0, h), (0, −h), (h, 0),
+    (−h, 0) (once for h = 0), each with a quarter of h's weight (so a rotationally symmetric lens keeps
+    its +y ESR); a list: those points, equal weights."""
+    if fields == "y":
+        return None
+    if fields == "xy":
+        given = system.field_weights or (1.0,) * len(system.rel_field)
+        pts, weights = [], []
+        for h, w in zip(system.rel_field, given, strict=True):
+            here = [(0.0, h)] if h == 0 else [(0.0, h), (0.0, -h), (h, 0.0), (-h, 0.0)]
+            pts += here
+            weights += [w / len(here)] * len(here)
+        return pts, tuple(weights)
+    pts = [(float(x), float(y)) for x, y in fields]
+    return pts, (1.0,) * len(pts)
+
+
 def make_job(lens: Lens, system: System, media: Sequence[Material], settings: Any, *,
              lm_vars: tuple[tuple[str, int], ...] = (), tols: list[Tolerance] | None = None) -> Job:
     """The ``Job`` of a lens and its tolerance settings (``ToleranceSpec``-like); ``lm_vars``: the LM
@@ -115,14 +134,24 @@ def make_job(lens: Lens, system: System, media: Sequence[Material], settings: An
     placement = nominal_params(lens)[1] if placed else None
     sampling = PupilSampling.parse(settings.sampling, seed=settings.seed, path="tolerance.sampling")
     pupil = sampling.points(dtype=lens.dtype)
+    half = sampling.half
+    fields_2d = field_points(system, getattr(settings, "fields", "y"))
+    field_xy = field_w = None
+    if fields_2d is not None:
+        field_xy = torch.tensor(fields_2d[0], dtype=lens.dtype)
+        field_w = fields_2d[1]
+        if half:  # x fields break the mirror symmetry x → −x: the mirrored half too
+            pupil = torch.cat([pupil, pupil * torch.tensor([-1.0, 1.0], dtype=pupil.dtype)], -2)
+            half = False
     lm_vars = tuple(lm_vars) if settings.compensator == "lm" else ()
     if settings.compensator == "lm" and not lm_vars:
         raise LensoptError("compensator = \"lm\" needs spec variables (vary = [\"radius\"] or [\"thickness\"] "
                            "on some surface other than the last)", path="tolerance.compensator", got="lm")
-    setup = EvalSetup(lens, system, placement, pupil, sampling.half,
+    setup = EvalSetup(lens, system, placement, pupil, half,
                       compensate=settings.compensator, focus_range=settings.focus_range,
                       mtf_frequency=settings.mtf_frequency, lm_vars=lm_vars,
-                      lm_steps=getattr(settings, "lm_steps", 5))
+                      lm_steps=getattr(settings, "lm_steps", 5), field_xy=field_xy, field_weights=field_w,
+                      aim=getattr(settings, "aim", "none"))
     return Job(setup, tuple(tols), d_line_indices(media, dtype=lens.dtype), semi_apertures(lens, system),
                settings.metric, settings.chunk)
 

@@ -387,23 +387,7 @@ def test_signal_during_optimize_saves_the_best_lens(tmp_path: Path, sig: int, co
     _check_lens_dir(tmp_path, "x.json")
 
 
-# Slow-marked: under load a SIGINT in the startup window sometimes prints its one line and still ends
-# with the default disposition (returncode -2); the cause is not found yet (issue 17 note), so the test
-# would make `make test` flaky. `make test-slow` runs it.
-@pytest.mark.slow
-@pytest.mark.parametrize(("sig", "code", "word"), [(signal.SIGINT, 130, "interrupted"),
-                                                   (signal.SIGTERM, 143, "terminated")])
-def test_signal_during_startup_is_one_line(sig: int, code: int, word: str) -> None:
-    for delay in (0.3, 0.8):
-        proc = _spawn("trace", str(COOKE))
-        time.sleep(delay)
-        proc.send_signal(sig)
-        out, err = proc.communicate(timeout=60)
-        if proc.returncode == 0 or (out.strip() and proc.returncode == -sig):
-            # Finished before the signal (a fast machine), or the signal came while the interpreter was
-            # shutting down after the command's output was complete (known gap, issue 17 note).
-            continue
-        assert proc.returncode == code and err.strip() == word, (delay, err)
+# Signals at every moment of a run (startup, command, exit): tests/cli/test_signals.py.
 
 
 # --------------------------------------------------------------------------------------- determinism

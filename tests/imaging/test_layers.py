@@ -16,9 +16,10 @@ from pathlib import Path
 PKG = Path(__file__).resolve().parents[2] / "lensopt"
 
 RANK = {"errors": 0, "materials": 1, "optics": 2, "analysis": 3, "imaging": 4, "plot": 4, "io": 4, "restore": 5,
-        "optim": 6, "tolerance": 7, "spec": 8, "qa": 8.5, "cli": 9}
+        "optim": 6, "tolerance": 7, "spec": 8, "qa": 8.5, "study": 8.5,
+        "cli": 9}
 # Leaf utilities usable from any layer (they import nothing else from lensopt).
-MODULE_RANK = {"lensopt.io.files": 0}
+MODULE_RANK = {"lensopt.io.files": 0, "lensopt.parallel": 0}
 UI_PACKAGES = ("typer", "rich", "pydantic")
 
 # Upward imports that predate issue 10 and belong to other work (each names why). Adding a new one

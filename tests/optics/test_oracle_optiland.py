@@ -230,7 +230,8 @@ def test_first_order(path: Path) -> None:
         assert abs(ours[key] - value) <= FIRST_ORDER_REL_TOL * max(abs(value), scale), key
 
 
-DOE_SPECS = [p for p in SPECS if any(s.diffractive for s in _model(p).lens.shapes)]
+# Specs whose diffractive surfaces carry phase power (a crude start with every phase term 0 has none to test).
+DOE_SPECS = [p for p in SPECS if any(s.diffractive for s in _model(p).lens.shapes) and bool(_model(p).lens.phase.any())]
 
 
 @pytest.mark.parametrize("path", DOE_SPECS, ids=_ids(DOE_SPECS))

@@ -120,3 +120,33 @@ def test_failed_rays_cost_a_constant_plus_their_margin() -> None:
     h2 = (b.result.hits[1].pos[..., :2] ** 2).sum(-1)
     torch.testing.assert_close(r[bad], 3.0 * h2[bad] / 4.0 / math.sqrt(n_r), rtol=1e-12, atol=0)
     assert float(r[~bad].abs().max()) == 0.0
+
+
+def test_ray_path_span_sums_the_gaps_it_covers() -> None:
+    # The plane front face sits at z = 0 and the image plane at z = 2 + 60 = 62 mm, so every ray travels
+    # exactly 62 mm axially from surface 0 to the image, whatever it does in between: a span
+    # { first = 0, min = 62.5 } costs (62.5 − 62)/√n_r per ray, and a span of surface 0 → 1 (the glass
+    # alone) with max = 1.9 costs ramp(t_z − 1.9) with t_z = 2 + sag(h) as in the glass test above.
+    spans = [{"first": 0, "min": 62.5}, {"first": 0, "to": 1, "max": 1.9}, {"first": -2, "max": 70.0}]
+    p = Problem(parse_spec(_plate(ray_path={"image_min": 0.0, "spans": spans})))
+    r = p.terms(p.theta0)["ray_path"]
+    n_r = p.pupil.shape[0] * 2
+    per_gap, span_rows = r[: 2 * n_r], r[2 * n_r:].view(3, 2, 1, -1) * math.sqrt(n_r)
+    assert float(per_gap.abs().max()) == 0.0
+    torch.testing.assert_close(span_rows[0], torch.full_like(span_rows[0], 0.5), rtol=1e-12, atol=1e-12)
+    h = torch.linalg.vector_norm(p.pupil, dim=-1) * 4.0
+    c = -1.0 / 50.0
+    sag = c * h**2 / (1 + torch.sqrt(1 - c**2 * h**2))
+    torch.testing.assert_close(span_rows[1, 0, 0], torch.clamp_min(2.0 + sag - 1.9, 0.0), rtol=1e-12, atol=1e-13)
+    assert float(span_rows[2].abs().max()) == 0.0  # 62 mm ≤ 70 mm
+
+
+def test_ray_path_span_errors_name_the_field() -> None:
+    from lensopt.errors import SpecError
+
+    with pytest.raises(SpecError, match=r"ray_path\.spans\[0\]\.first: no such surface"):
+        Problem(parse_spec(_plate(ray_path={"spans": [{"first": 5, "min": 1.0}]})))
+    with pytest.raises(SpecError, match=r"ray_path\.spans\[0\]\.to: `to` must come after"):
+        Problem(parse_spec(_plate(ray_path={"spans": [{"first": 1, "to": 0, "min": 1.0}]})))
+    with pytest.raises(SpecError, match=r"spans\[0\]\.min: a span needs a min or a max"):
+        parse_spec(_plate(ray_path={"spans": [{"first": 1}]}))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 import torch
 
@@ -87,3 +89,22 @@ def test_solve_errors_name_the_field(cooke: dict) -> None:
     cooke["optimize"]["solves"] = [{"type": "efl"}]
     with pytest.raises(SpecError, match=r"optimize\.solves\[0\]\.value: a efl solve needs a target"):
         parse_spec(cooke)
+
+
+def test_ttl_and_image_height_solves_hold_together(cooke: dict) -> None:
+    # The telephoto study's pair (seed S4.1.5): the TTL solve sets the last airspace, then the last
+    # curvature is solved for the paraxial image height on that (fixed-track) image plane. Both targets
+    # must hold at once, at any θ.
+    p = _problem(cooke, [{"type": "image_height", "surface": 5, "value": 17.5}, {"type": "ttl", "value": 58.0}])
+    for theta in (p.theta0, _perturbed(p)):
+        lens, ok = p.lens(theta)
+        assert bool(ok)
+        fo = first_order(lens, p.system)
+        assert float(fo.total_track) == pytest.approx(58.0, rel=1e-14)
+        assert float(fo.paraxial_image_height) == pytest.approx(17.5, rel=1e-12)
+        # By hand: the chief ray (through the stop centre) traced paraxially lands at 17.5 mm.
+        w = p.system.reference
+        u = torch.tensor(math.tan(math.radians(p.system.field_max)), dtype=torch.float64)
+        y0 = -u * fo.entrance_pupil_z  # height on surface 1 of the ray through the entrance pupil centre
+        ys, _ = trace_paraxial(lens, w, y0, lens.index[0, w] * u)
+        assert abs(float(ys[-1])) == pytest.approx(17.5, rel=1e-10)

@@ -1,0 +1,37 @@
+"""Design-sweep figure (seed Figure S13's form): the best ESR of every grid point against the swept
+value, one line per combination of the other keys, every finished start as a faint dot."""
+
+from __future__ import annotations
+
+from matplotlib.figure import Figure
+
+from lensopt.plot.style import FIELD_COLORS, new_figure
+
+__all__ = ["sweep_figure"]
+
+
+def sweep_figure(series: dict[str, list[tuple[float, float]]], starts: list[tuple[float, float]], *, xlabel: str,
+                 title: str = "", ylabel: str = "ESR (µm)") -> Figure:
+    """Best ESR against the swept value.
+
+    Args:
+        series: label → [(value, best ESR µm)] per point (label "" when one key is swept).
+        starts: (value, ESR µm) of every finished start.
+    """
+    fig = new_figure(5.5, 3.8)
+    ax = fig.add_subplot()
+    if starts:
+        xs, ys = zip(*starts, strict=True)
+        ax.scatter(xs, ys, s=12, color="0.55", alpha=0.35, lw=0, label="every start", zorder=1)
+    for j, (label, pts) in enumerate(sorted(series.items())):
+        pts = sorted(pts)
+        x, y = zip(*pts, strict=True)
+        ax.plot(x, y, "o-", color=FIELD_COLORS[j % len(FIELD_COLORS)], lw=1.4, ms=4,
+                label=f"best of starts{': ' + label if label else ''}", zorder=2)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(True, lw=0.3, alpha=0.6)
+    ax.legend(fontsize=7)
+    if title:
+        ax.set_title(title)
+    return fig
