@@ -10,26 +10,14 @@ size is made small here so that a few thousand rays give many chunks.
 import pytest
 import torch
 
+# MIXED: every code path of the trace (Newton, spheres, a hyperboloid, clipping, a diffractive surface,
+# TIR, misses, Newton failures), shared with the compiled-trace tests.
+from test_compiled_trace import MIXED
+
 from lensopt.optics import trace as trace_mod
 from lensopt.optics.trace import REASONS, Rays, trace
 from lensopt.spec import build, parse_spec
 
-# Every code path of the trace: Newton on an even asphere, spheres, a hyperboloid, a clipping
-# aperture, a diffractive surface, TIR, misses, Newton failures (as in test_compiled_trace.py).
-MIXED = {
-    "name": "mixed",
-    "system": {"aperture": {"epd": 12.0}, "field": {"hfov_deg": 10.0, "relative": [0.0, 1.0]}, "object": "infinity"},
-    "spectrum": {"wavelengths_nm": [486.1, 587.6, 656.3], "reference_nm": 587.6},
-    "surfaces": [
-        {"type": "asphere", "radius": 15.0, "conic": -0.5, "coefficients": {4: -4e-4, 6: 2e-6}, "thickness": 4.0,
-         "material": "N-BK7"},
-        {"type": "sphere", "radius": -40.0, "thickness": 2.0, "stop": True},
-        {"type": "conic", "radius": -20.0, "conic": -2.5, "thickness": 2.0, "material": "N-SF5",
-         "semi_diameter": 8.0, "clip": True},
-        {"type": "diffractive", "base": {"type": "plane"}, "phase": {2: -30.0, 4: 0.05},
-         "design_wavelength_nm": 587.6, "thickness": 30.0},
-    ],
-}
 SPHERES = {  # all rays pass: the shortcut branches (every select's condition true) are taken
     "name": "doublet",
     "system": {"aperture": {"epd": 10.0}, "field": {"hfov_deg": 5.0, "relative": [0.0, 1.0]}, "object": "infinity"},
