@@ -13,7 +13,6 @@ import contextlib
 import functools
 import json
 import logging
-import math
 import os
 import signal
 import sys
@@ -33,6 +32,7 @@ except ImportError:  # pragma: no cover
 
 from lensopt.cli_process import EX_SIGINT, EX_SIGTERM, Interrupted, Terminated, is_cli_process, state
 from lensopt.errors import LensoptError
+from lensopt.io.files import json_safe
 
 __all__ = ["AimOpt", "AimStepsOpt", "check_seed", "DeviceOpt", "EX_INTERNAL", "JsonOpt", "LensArg", "SamplingOpt",
            "SeedOpt",
@@ -311,19 +311,8 @@ def _is_pseudo_fs(folder: Path) -> bool:
     return len(parts) > 1 and parts[1] in ("proc", "sys")
 
 
-def _clean(obj: Any) -> Any:
-    """JSON-safe numbers: NaN/inf → null (the reason is elsewhere in the object); finite floats unchanged."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _clean(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_clean(v) for v in obj]
-    return obj
-
-
 def print_json(obj: Any) -> None:
-    sys.stdout.write(json.dumps(_clean(obj), indent=2, allow_nan=False) + "\n")
+    sys.stdout.write(json.dumps(json_safe(obj), indent=2, allow_nan=False) + "\n")
 
 
 class LowerLevelFormatter(logging.Formatter):

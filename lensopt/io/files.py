@@ -4,12 +4,14 @@ so that an interrupted or failed command never leaves a half-written file behind
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
-__all__ = ["atomic_path", "write_text_atomic", "write_bytes_atomic"]
+__all__ = ["atomic_path", "json_safe", "write_text_atomic", "write_bytes_atomic"]
 
 
 @contextlib.contextmanager
@@ -48,3 +50,15 @@ def write_text_atomic(target: str | os.PathLike[str], text: str) -> None:
 def write_bytes_atomic(target: str | os.PathLike[str], data: bytes) -> None:
     with atomic_path(target) as tmp:
         tmp.write_bytes(data)
+
+
+def json_safe(obj: Any) -> Any:
+    """``obj`` with every NaN/inf float turned into None (JSON null), through dicts, lists and tuples;
+    finite floats and everything else unchanged. For ``json.dumps(..., allow_nan=False)``."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_safe(v) for v in obj]
+    return obj

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from lensopt.errors import LensoptError
-from lensopt.io.files import write_text_atomic
+from lensopt.io.files import json_safe, write_text_atomic
 from lensopt.parallel import run_tasks
 from lensopt.spec.io import dump_json, parse_spec
 from lensopt.spec.models import LensSpec
@@ -346,22 +346,12 @@ def _csv(rows: list[dict[str, Any]]) -> str:
     return buf.getvalue()
 
 
-def _json_safe(obj: Any) -> Any:
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_json_safe(v) for v in obj]
-    return obj
-
-
 def write_outputs(outdir: Path, result: SweepResult, *, spec_name: str, plot: bool = True) -> None:
     """sweep.json, sweep.csv, best_<i>.json and sweep.png (atomic each)."""
     starts = [result.records[k] for k in sorted(result.records)]
     doc = {"spec": spec_name, "keys": result.keys, "settings": asdict(result.settings),
            "complete": result.complete, "points": result.rows, "starts": starts}
-    write_text_atomic(outdir / "sweep.json", json.dumps(_json_safe(doc), indent=2, allow_nan=False) + "\n")
+    write_text_atomic(outdir / "sweep.json", json.dumps(json_safe(doc), indent=2, allow_nan=False) + "\n")
     write_text_atomic(outdir / "sweep.csv", _csv(result.rows))
     for row in result.rows:
         if row["best_start"] is not None:
