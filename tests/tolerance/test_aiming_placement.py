@@ -20,6 +20,7 @@ import math
 from pathlib import Path
 
 import pytest
+import scipy.optimize as scipy_opt
 import torch
 
 from lensopt.optics.aiming import aim_chief, stop_hit
@@ -104,7 +105,6 @@ def test_cmount_stop_decenter_in_tolerance_trials() -> None:
 
 
 def test_cooke_tilted_element_aim_matches_brute_force() -> None:
-    scipy_opt = pytest.importorskip("scipy.optimize")
     model = build(load_spec(ROOT / "specs" / "cooke_triplet.toml"))
     system = model.system
     lens = _placed(model.lens, groups=((0, 1),), group_decenter=torch.tensor([[0.05, 0.0]], dtype=torch.float64),
