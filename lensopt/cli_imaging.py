@@ -80,6 +80,8 @@ def run_simulate(
     assert output is not None  # checked by the caller
     with torch.inference_mode():
         res = run_plan(camera, plan, pilot, reg, sensor, img, opts, timings)
+    if reference is not None or not score:  # the scene is needed now only to score against it: free it
+        del img
     t0 = time.perf_counter()
     encoding = write_image(output, res.image, info)
     timings["write image"] = time.perf_counter() - t0

@@ -14,8 +14,9 @@ from __future__ import annotations
 import math
 
 import torch
-from scipy.fft import next_fast_len
 from torch import Tensor
+
+from lensopt.analysis.fft_size import next_fast_len
 
 __all__ = ["airy_radius_mm", "airy_field", "fft_convolve_same", "diffraction_heuristic", "incoherent_airy"]
 
@@ -67,7 +68,7 @@ def fft_convolve_same(x: Tensor, k: Tensor) -> Tensor:
     (broadcast over the batch), cropped to the input size ("same", centred), via real FFTs."""
     h, w = x.shape[-2:]
     kh, kw = k.shape[-2:]
-    fh, fw = next_fast_len(h + kh - 1, real=True), next_fast_len(w + kw - 1, real=True)
+    fh, fw = next_fast_len(h + kh - 1), next_fast_len(w + kw - 1)
     spec = torch.fft.rfft2(x, s=(fh, fw)) * torch.fft.rfft2(k.to(x.dtype), s=(fh, fw))
     full = torch.fft.irfft2(spec, s=(fh, fw))
     oy, ox = (kh - 1) // 2, (kw - 1) // 2

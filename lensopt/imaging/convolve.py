@@ -14,8 +14,9 @@ from __future__ import annotations
 import math
 
 import torch
-from scipy.fft import next_fast_len
 from torch import Tensor
+
+from lensopt.analysis.fft_size import next_fast_len
 
 __all__ = ["patch_bounds", "hann_weights", "overlap_add_convolve"]
 
@@ -67,7 +68,7 @@ def overlap_add_convolve(
     psfs: Tensor,
     *,
     overlap: float = 0.25,
-    max_bytes: int = 128 * 2**20,
+    max_bytes: int = 64 * 2**20,
 ) -> Tensor:
     """Convolve ``image`` with a grid of PSFs.
 
@@ -89,12 +90,12 @@ def overlap_add_convolve(
     wx, sup_x = hann_weights(w, gw, overlap, dtype=image.dtype, device=image.device)
     ph = max(b - a for a, b in sup_y)
     pw = max(b - a for a, b in sup_x)
-    fh = next_fast_len(ph + 2 * r, real=True)
-    fw = next_fast_len(pw + 2 * r, real=True)
+    fh = next_fast_len(ph + 2 * r)
+    fw = next_fast_len(pw + 2 * r)
     whole = None  # the reflect-padded image, made only when a tile cannot be padded on its own
     out = torch.zeros_like(image)
     patches = [(i, j) for i in range(gh) for j in range(gw)]
-    per_patch = c * fh * (fw // 2 + 1) * 8 * 3 + c * fh * fw * 4 * 2
+    per_patch = c * fh * (fw // 2 + 1) * 8 * 2 + c * fh * fw * 4 * 2  # tile, its and the kernel's spectra, result
     chunk = max(1, int(max_bytes // max(per_patch, 1)))
     for start in range(0, len(patches), chunk):
         group = patches[start:start + chunk]
@@ -107,7 +108,12 @@ def overlap_add_convolve(
                 tile = whole[:, y0:y1 + 2 * r, x0:x1 + 2 * r]
             tiles[n, :, : y1 - y0 + 2 * r, : x1 - x0 + 2 * r] = tile
         kern = torch.stack([psfs[i, j] for i, j in group]).to(image.dtype)
-        spec = torch.fft.rfft2(tiles, s=(fh, fw)) * torch.fft.rfft2(kern, s=(fh, fw))
+        spec = torch.fft.rfft2(tiles, s=(fh, fw))
+        del tiles
+        kspec = torch.fft.rfft2(kern, s=(fh, fw))
+        # in place unless autograd needs the factors (differentiable rendering): one spectrum less in memory
+        spec = spec * kspec if spec.requires_grad or kspec.requires_grad else spec.mul_(kspec)
+        del kspec
         conv = torch.fft.irfft2(spec, s=(fh, fw))
         del spec
         for n, (i, j) in enumerate(group):

@@ -109,7 +109,9 @@ def run_plan(camera: Camera | ProvidesCamera, plan: ScenePlan, pilot: Pilot, reg
     timings = {} if timings is None else timings
     camera = as_camera(camera)
     device = camera.lens.device
-    out = torch.from_numpy(np.ascontiguousarray(image, dtype=np.float32)).permute(2, 0, 1).contiguous().to(device)
+    # (C, H, W): no copy when ``image`` is the (H, W, C) view of a planar buffer (``read_image`` returns one)
+    source = torch.from_numpy(np.asarray(image, dtype=np.float32)).permute(2, 0, 1).contiguous().to(device)
+    out = source
     eff = plan.effects
     px_mm = plan.pixel_um * 1e-3
     if eff["distortion"]["on"]:
@@ -150,5 +152,8 @@ def run_plan(camera: Camera | ProvidesCamera, plan: ScenePlan, pilot: Pilot, reg
     if eff["noise"]["on"]:
         with _timed(timings, "noise"):
             out = add_noise(out, eff["noise"]["sigma"], seed=eff["noise"]["seed"])
+    if out is source:  # nothing applied: never hand back the caller's own buffer
+        out = out.clone()
+    del source
     result = out.permute(1, 2, 0).cpu().numpy()  # on the CPU a view; made contiguous by the caller if needed
     return SimulationResult(result, grid, stack, timings)

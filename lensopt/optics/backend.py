@@ -30,12 +30,14 @@ import contextlib
 import contextvars
 import json
 import logging
+import math
 import os
 import tempfile
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+import numpy as np
 import torch
 import torch.autograd.forward_ad as fwad
 
@@ -134,7 +136,8 @@ def trace_with(lens: Lens, rays: Rays, *, backend: str | None = None, upto: int 
     """``trace(lens, rays, ...)`` on the chosen backend (default: ``current_backend()``)."""
     if backend is not None:
         check_backend(backend, path="backend")
-    n_rays = torch.broadcast_shapes(rays.pos.shape[:-1], rays.dir.shape[:-1], rays.wavelength.shape).numel()
+    # math.prod of the broadcast shape (torch.broadcast_shapes would import sympy: 0.8 s on first use)
+    n_rays = math.prod(np.broadcast_shapes(rays.pos.shape[:-1], rays.dir.shape[:-1], rays.wavelength.shape))
     name = choose_backend(lens, n_rays, backend=backend, upto=upto, record=record,
                           newton_iterations=newton_iterations)
     if name == "eager":
