@@ -5,8 +5,9 @@ by half the overlap (OP × patch size), convolved (FFT) with its PSF, and the co
 recombined as a pixel-wise weighted average with separable Hann ramps across the patch borders. The
 1D weights sum to exactly 1 everywhere, so a uniform image stays uniform and a single PSF gives plain
 convolution. Image borders are padded by reflection, tile by tile (no padded copy of the whole image).
-Patches are processed in chunks whose FFT buffers stay under ``max_bytes``, so the memory beyond the
-input and output images is bounded for large images.
+Without autograd, each channel of each patch goes through one set of zero-padded FFT buffers made once
+(a few planes: the memory beyond the input and output images does not grow with the image); with
+autograd (differentiable rendering), patches go in batches whose FFT buffers stay under ``max_bytes``.
 """
 
 from __future__ import annotations
@@ -77,7 +78,7 @@ def overlap_add_convolve(
         psfs: (H_g, W_g, C, K, K) PSF grid in image orientation (row 0 at the top of the image),
             K odd, each summing to 1; grid row r, column c applies to patch (r, c).
         overlap: OP, the fraction of a patch that overlaps its neighbour (S1.5.2).
-        max_bytes: bound on the FFT buffers of one chunk of patches.
+        max_bytes: bound on the FFT buffers of one batch of patches (the differentiable path).
 
     Returns:
         (C, H, W) convolved image, same dtype.
@@ -95,34 +96,77 @@ def overlap_add_convolve(
     whole = None  # the reflect-padded image, made only when a tile cannot be padded on its own
     out = torch.zeros_like(image)
     patches = [(i, j) for i in range(gh) for j in range(gw)]
-    per_patch = c * fh * (fw // 2 + 1) * 8 * 2 + c * fh * fw * 4 * 2  # tile, its and the kernel's spectra, result
+
+    def tile_of(i: int, j: int) -> Tensor:
+        nonlocal whole
+        (y0, y1), (x0, x1) = sup_y[i], sup_x[j]
+        tile = _tile(image, y0 - r, y1 + r, x0 - r, x1 + r)
+        if tile is None:
+            whole = _reflect_pad(image, r) if whole is None else whole
+            tile = whole[:, y0:y1 + 2 * r, x0:x1 + 2 * r]
+        return tile
+
+    def add(i: int, j: int, conv: Tensor, channels: slice) -> None:
+        (y0, y1), (x0, x1) = sup_y[i], sup_x[j]
+        # Full linear convolution index (y − y0 + 2r) ↔ output pixel y (kernel centred on r).
+        valid = conv[..., 2 * r: 2 * r + (y1 - y0), 2 * r: 2 * r + (x1 - x0)]
+        out[channels, y0:y1, x0:x1] += valid * (wy[i, y0:y1, None] * wx[j, None, x0:x1])
+
+    if not (torch.is_grad_enabled() and (image.requires_grad or psfs.requires_grad)):
+        # One channel of one patch at a time, through FFT buffers made once: as fast as batches (faster
+        # with MKL's FFT), and the FFT memory is a few planes instead of growing with the batch (MKL
+        # keeps ~60 MB per batched 3-channel 1k² transform it has run; see benchmarks/RESULTS.md, issue 14).
+        bufs = _PlaneFft(fh, fw, k, image.dtype, image.device)
+        for i, j in patches:
+            tile = tile_of(i, j)
+            for ch in range(c):
+                add(i, j, bufs.convolve(tile[ch], psfs[i, j, ch]), slice(ch, ch + 1))
+        return out
+    # With autograd (differentiable rendering): batched, out of place.
+    per_patch = c * fh * (fw // 2 + 1) * 8 * 2 + c * fh * fw * 4 * 2  # tile and kernel spectra, tile, result
     chunk = max(1, int(max_bytes // max(per_patch, 1)))
     for start in range(0, len(patches), chunk):
         group = patches[start:start + chunk]
         tiles = torch.zeros(len(group), c, ph + 2 * r, pw + 2 * r, dtype=image.dtype, device=image.device)
         for n, (i, j) in enumerate(group):
-            (y0, y1), (x0, x1) = sup_y[i], sup_x[j]
-            tile = _tile(image, y0 - r, y1 + r, x0 - r, x1 + r)
-            if tile is None:
-                whole = _reflect_pad(image, r) if whole is None else whole
-                tile = whole[:, y0:y1 + 2 * r, x0:x1 + 2 * r]
-            tiles[n, :, : y1 - y0 + 2 * r, : x1 - x0 + 2 * r] = tile
+            tile = tile_of(i, j)
+            tiles[n, :, : tile.shape[-2], : tile.shape[-1]] = tile
         kern = torch.stack([psfs[i, j] for i, j in group]).to(image.dtype)
-        spec = torch.fft.rfft2(tiles, s=(fh, fw))
-        del tiles
-        kspec = torch.fft.rfft2(kern, s=(fh, fw))
-        # in place unless autograd needs the factors (differentiable rendering): one spectrum less in memory
-        spec = spec * kspec if spec.requires_grad or kspec.requires_grad else spec.mul_(kspec)
-        del kspec
-        conv = torch.fft.irfft2(spec, s=(fh, fw))
-        del spec
+        conv = torch.fft.irfft2(torch.fft.rfft2(tiles, s=(fh, fw)) * torch.fft.rfft2(kern, s=(fh, fw)), s=(fh, fw))
+        del tiles, kern
         for n, (i, j) in enumerate(group):
-            (y0, y1), (x0, x1) = sup_y[i], sup_x[j]
-            # Full linear convolution index (y − y0 + 2r) ↔ output pixel y (kernel centred on r).
-            valid = conv[n, :, 2 * r: 2 * r + (y1 - y0), 2 * r: 2 * r + (x1 - x0)]
-            weight = wy[i, y0:y1, None] * wx[j, None, x0:x1]
-            out[:, y0:y1, x0:x1] += valid * weight
+            add(i, j, conv[n], slice(None))
     return out
+
+
+class _PlaneFft:
+    """Linear convolution of one image plane with one kernel through zero-padded fh × fw FFT buffers made
+    once: the same numbers as ``irfft2(rfft2(x, s) * rfft2(k, s), s)`` of the unpadded arrays."""
+
+    def __init__(self, fh: int, fw: int, k: int, dtype: torch.dtype, device: torch.device) -> None:
+        cdtype = torch.complex128 if dtype == torch.float64 else torch.complex64
+        self.tile = torch.zeros(fh, fw, dtype=dtype, device=device)
+        self.kern = torch.zeros(fh, fw, dtype=dtype, device=device)  # only [:k, :k] is ever written
+        self.spec = torch.empty(fh, fw // 2 + 1, dtype=cdtype, device=device)
+        self.kspec = torch.empty_like(self.spec)
+        self.conv = torch.empty(fh, fw, dtype=dtype, device=device)
+        self.k = k
+        self.shape = (0, 0)  # of the tile last written (the rest of the buffer is zero)
+
+    def convolve(self, plane: Tensor, kernel: Tensor) -> Tensor:
+        th, tw = plane.shape
+        ph, pw = self.shape
+        if ph > th:
+            self.tile[th:ph, :pw] = 0
+        if pw > tw:
+            self.tile[:th, tw:pw] = 0
+        self.tile[:th, :tw] = plane
+        self.shape = (th, tw)
+        self.kern[: self.k, : self.k] = kernel
+        torch.fft.rfft2(self.tile, out=self.spec)
+        torch.fft.rfft2(self.kern, out=self.kspec)
+        self.spec.mul_(self.kspec)
+        return torch.fft.irfft2(self.spec, s=self.tile.shape, out=self.conv)
 
 
 def _tile(image: Tensor, ya: int, yb: int, xa: int, xb: int) -> Tensor | None:

@@ -56,9 +56,11 @@ def test_chunked_processing_gives_the_same_result() -> None:
     gen = torch.Generator().manual_seed(4)
     img = torch.rand(3, 64, 80, generator=gen, dtype=F32)
     psfs = random_psfs(3, 4, 3, 7).to(F32)
-    whole = overlap_add_convolve(img, psfs)
-    tiled = overlap_add_convolve(img, psfs, max_bytes=1)  # one patch at a time
-    assert torch.allclose(whole, tiled, atol=1e-6)
+    whole = overlap_add_convolve(img, psfs)  # no autograd: plane by plane
+    batched = overlap_add_convolve(img, psfs.requires_grad_(True))  # autograd: all patches in one batch
+    tiled = overlap_add_convolve(img, psfs, max_bytes=1)  # autograd, one patch at a time
+    assert torch.allclose(whole, batched.detach(), atol=1e-6)
+    assert torch.allclose(whole, tiled.detach(), atol=1e-6)
 
 
 def test_energy_is_kept_in_the_interior() -> None:
