@@ -121,9 +121,9 @@ def read_image(path: str | Path, *, option: str = "IMAGE") -> tuple[np.ndarray, 
         check_pixels(raw, list(spec.channelnames), option=option, path=path)  # integers: only extra channels
         table = _decode_table(_INT_BITS[base], linear)
         planar = np.empty((channels, spec.height, spec.width), dtype=np.float32)
-        for c in range(channels):
+        for c in range(channels):  # mode="clip": every code is in the table (the default checks each, 10× slower)
             for y in range(0, spec.height, _BAND_ROWS):
-                np.take(table, raw[y:y + _BAND_ROWS, :, c], out=planar[c, y:y + _BAND_ROWS])
+                np.take(table, raw[y:y + _BAND_ROWS, :, c], out=planar[c, y:y + _BAND_ROWS], mode="clip")
         return planar.transpose(1, 2, 0), info
     arr = np.asarray(data, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
     arr = check_pixels(arr, list(spec.channelnames), option=option, path=path)
