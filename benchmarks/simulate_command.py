@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -61,14 +62,20 @@ def _env(tree: Path | None, hwm: Path) -> dict[str, str]:
     return env
 
 
-def timed(cmd: list[str], env: dict[str, str], cwd: Path) -> float:
-    """Wall seconds from spawn to exit; raises on failure."""
+def timed(cmd: list[str], env: dict[str, str], cwd: Path) -> tuple[float, str]:
+    """(wall seconds from spawn to exit, stdout); raises on failure."""
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, env=env, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         raise SystemExit(f"{cmd[:3]} failed: {proc.stderr[-2000:]}")
-    return wall
+    return wall, proc.stdout
+
+
+def stage_table(stdout: str) -> dict[str, float]:
+    """The ``stages`` table that ``lensopt simulate`` prints (rows ``│ name │ seconds │``)."""
+    rows = re.findall(r"^[│┃|]\s*([a-z][^│┃|]*?)\s*[│┃|]\s*([0-9]+\.[0-9]+)\s*[│┃|]\s*$", stdout, flags=re.M)
+    return {name: float(sec) for name, sec in rows}
 
 
 def run_lensopt(tree: Path, scene: Path, out: Path, extra: list[str], tmp: Path) -> dict:
@@ -77,14 +84,15 @@ def run_lensopt(tree: Path, scene: Path, out: Path, extra: list[str], tmp: Path)
     args = [str(ROOT / "specs" / "cooke_triplet.toml"), str(scene), "-o", str(out), "--region", "full",
             "--grid", "5x4", "--effects", "-diffraction", *extra]
     # cwd = the tree: ``python -c`` puts the working directory first on sys.path, before PYTHONPATH.
-    wall = timed([sys.executable, "-c", _LENSOPT.format(bench=str(HERE)), "simulate", *args], _env(tree, hwm), tree)
-    return {"wall_s": wall, **json.loads(hwm.read_text())}
+    wall, stdout = timed([sys.executable, "-c", _LENSOPT.format(bench=str(HERE)), "simulate", *args],
+                         _env(tree, hwm), tree)
+    return {"wall_s": wall, **json.loads(hwm.read_text()), "stages": stage_table(stdout)}
 
 
 def run_peer(python: str, zmx: Path, scene: Path, out: Path, tmp: Path) -> dict:
     js = tmp / "peer.json"
     js.unlink(missing_ok=True)
-    wall = timed([python, str(HERE / "peer_deeplens.py"), str(zmx), str(scene), "whole", str(out), "--json", str(js),
+    wall, _ = timed([python, str(HERE / "peer_deeplens.py"), str(zmx), str(scene), "whole", str(out), "--json", str(js),
                   "--grid", "5x4", "--ks", "23", "--spp", "2048", "--threads", "1"], _env(None, tmp / "unused"), HERE)
     r = json.loads(js.read_text())
     return {"wall_s": wall, "peak_rss_mb": r["peak_rss_mb"], "torch_threads": r["threads"], "stages": r["timings"]}
@@ -163,6 +171,12 @@ def main() -> None:
     for k, r in rows.items():
         print(f"| {k} | {r['wall_s_median']:.2f} | {r['wall_s_min']:.2f}–{r['wall_s_max']:.2f} | "
               f"{r['peak_rss_mb_median']:.0f} | {r['torch_threads']} | {r['output_mb']:.1f} |")
+    for k, r in rows.items():
+        names = list(dict.fromkeys(n for run in r["runs"] for n in run["stages"]))
+        r["stages_median_s"] = {n: statistics.median(run["stages"].get(n, 0.0) for run in r["runs"]) for n in names}
+        inside = sum(v for n, v in r["stages_median_s"].items() if n != "in-process total")
+        print(f"\n{k}, stage medians (s): " + ", ".join(f"{n} {v:.2f}" for n, v in r["stages_median_s"].items())
+              + f"; the rest of the wall time (start-up, imports, exit): {r['wall_s_median'] - inside:.2f}")
     ratios = {}
     for k, r in rows.items():
         if k != "lensopt simulate (this tree)":

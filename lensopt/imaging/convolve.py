@@ -5,9 +5,10 @@ by half the overlap (OP × patch size), convolved (FFT) with its PSF, and the co
 recombined as a pixel-wise weighted average with separable Hann ramps across the patch borders. The
 1D weights sum to exactly 1 everywhere, so a uniform image stays uniform and a single PSF gives plain
 convolution. Image borders are padded by reflection, tile by tile (no padded copy of the whole image).
-Without autograd, each channel of each patch goes through one set of zero-padded FFT buffers made once
-(a few planes: the memory beyond the input and output images does not grow with the image); with
-autograd (differentiable rendering), patches go in batches whose FFT buffers stay under ``max_bytes``.
+Large patches (``PLANE_MIN_BYTES``) without autograd go one channel at a time through zero-padded FFT
+buffers made once (a few planes: the memory beyond the input and output images does not grow with the
+image); small patches, and any with autograd (differentiable rendering), go in batches whose FFT
+buffers stay under ``max_bytes``.
 """
 
 from __future__ import annotations
@@ -19,7 +20,10 @@ from torch import Tensor
 
 from lensopt.analysis.fft_size import next_fast_len
 
-__all__ = ["patch_bounds", "hann_weights", "overlap_add_convolve"]
+__all__ = ["patch_bounds", "hann_weights", "overlap_add_convolve", "PLANE_MIN_BYTES"]
+
+#: Without autograd, patches whose FFT buffers (all channels) exceed this go one plane at a time.
+PLANE_MIN_BYTES = 8 * 2**20
 
 
 def patch_bounds(length: int, parts: int) -> list[tuple[int, int]]:
@@ -112,18 +116,19 @@ def overlap_add_convolve(
         valid = conv[..., 2 * r: 2 * r + (y1 - y0), 2 * r: 2 * r + (x1 - x0)]
         out[channels, y0:y1, x0:x1] += valid * (wy[i, y0:y1, None] * wx[j, None, x0:x1])
 
-    if not (torch.is_grad_enabled() and (image.requires_grad or psfs.requires_grad)):
-        # One channel of one patch at a time, through FFT buffers made once: as fast as batches (faster
-        # with MKL's FFT), and the FFT memory is a few planes instead of growing with the batch (MKL
-        # keeps ~60 MB per batched 3-channel 1k² transform it has run; see benchmarks/RESULTS.md, issue 14).
+    per_patch = c * fh * (fw // 2 + 1) * 8 * 2 + c * fh * fw * 4 * 2  # tile and kernel spectra, tile, result
+    grad = torch.is_grad_enabled() and (image.requires_grad or psfs.requires_grad)
+    if not grad and per_patch > PLANE_MIN_BYTES:
+        # Large patches one channel at a time through FFT buffers made once: faster than batches with one
+        # thread (MKL's FFT), and the FFT memory stays a few planes (batched 3-channel 1k² transforms left
+        # ~140 MB more resident). Small patches go in batches: fewer, longer calls.
         bufs = _PlaneFft(fh, fw, k, image.dtype, image.device)
         for i, j in patches:
             tile = tile_of(i, j)
             for ch in range(c):
                 add(i, j, bufs.convolve(tile[ch], psfs[i, j, ch]), slice(ch, ch + 1))
         return out
-    # With autograd (differentiable rendering): batched, out of place.
-    per_patch = c * fh * (fw // 2 + 1) * 8 * 2 + c * fh * fw * 4 * 2  # tile and kernel spectra, tile, result
+    # Batches of patches (and with autograd: differentiable rendering), out of place.
     chunk = max(1, int(max_bytes // max(per_patch, 1)))
     for start in range(0, len(patches), chunk):
         group = patches[start:start + chunk]

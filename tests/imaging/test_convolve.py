@@ -52,11 +52,16 @@ def test_one_psf_is_plain_convolution_with_reflected_borders() -> None:
         assert np.abs(out[ch].numpy() - ref).max() < 1e-12
 
 
-def test_chunked_processing_gives_the_same_result() -> None:
+def test_chunked_processing_gives_the_same_result(monkeypatch: pytest.MonkeyPatch) -> None:
+    import lensopt.imaging.convolve as conv
+
     gen = torch.Generator().manual_seed(4)
     img = torch.rand(3, 64, 80, generator=gen, dtype=F32)
     psfs = random_psfs(3, 4, 3, 7).to(F32)
+    small = overlap_add_convolve(img, psfs)  # small patches, no autograd: one batch
+    monkeypatch.setattr(conv, "PLANE_MIN_BYTES", 0)
     whole = overlap_add_convolve(img, psfs)  # no autograd: plane by plane
+    assert torch.allclose(whole, small, atol=1e-6)
     batched = overlap_add_convolve(img, psfs.requires_grad_(True))  # autograd: all patches in one batch
     tiled = overlap_add_convolve(img, psfs, max_bytes=1)  # autograd, one patch at a time
     assert torch.allclose(whole, batched.detach(), atol=1e-6)
