@@ -74,7 +74,7 @@ def timed(cmd: list[str], env: dict[str, str], cwd: Path) -> tuple[float, str]:
 
 def stage_table(stdout: str) -> dict[str, float]:
     """The ``stages`` table that ``lensopt simulate`` prints (rows ``│ name │ seconds │``)."""
-    rows = re.findall(r"^[│┃|]\s*([a-z][^│┃|]*?)\s*[│┃|]\s*([0-9]+\.[0-9]+)\s*[│┃|]\s*$", stdout, flags=re.M)
+    rows = re.findall(r"^[│┃|]\s*([A-Za-z][^│┃|]*?)\s*[│┃|]\s*([0-9]+\.[0-9]+)\s*[│┃|]\s*$", stdout, flags=re.M)
     return {name: float(sec) for name, sec in rows}
 
 
