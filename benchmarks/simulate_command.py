@@ -14,9 +14,10 @@ PSF and wavelength, 23 × 23 kernels, R/G/B weights of the spec's 480/550/650 nm
 DeepLens 2.5.6: ``benchmarks/peer_deeplens.py ... whole`` — its own rendering example's steps (PIL read,
 /255, ``psf_map_rgb`` 5 × 4 at 650/550/480 nm, 2 048 spp, 23 × 23, ``conv_psf_map``, torchvision's
 ``save_image`` steps, PIL PNG write), the same lens read from the .zmx that benchmarks/cooke_zmx.py
-writes from the spec. Both with one thread (OMP_NUM_THREADS = MKL_NUM_THREADS = 1; DeepLens also
-``torch.set_num_threads(1)``); each child reports the threads torch used. ``--before``: another checkout's
-``lensopt simulate`` in the same run (e.g. main before a change); its output PNG is compared code by code.
+writes from the spec. Both with one thread by default (OMP_NUM_THREADS = MKL_NUM_THREADS = 1; DeepLens
+also ``torch.set_num_threads(1)``; ``--threads N`` for N); each child reports the threads torch used.
+``--before``: another checkout's ``lensopt simulate`` in the same run (e.g. main before a change); its
+output PNG is compared code by code.
 """
 
 from __future__ import annotations
@@ -55,8 +56,12 @@ app()
 """
 
 
+THREADS = 1
+
+
 def _env(tree: Path | None, hwm: Path) -> dict[str, str]:
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "BENCH_HWM_FILE": str(hwm)}
+    n = str(THREADS)
+    env = {**os.environ, "OMP_NUM_THREADS": n, "MKL_NUM_THREADS": n, "BENCH_HWM_FILE": str(hwm)}
     if tree is not None:
         env["PYTHONPATH"] = str(tree)
     return env
@@ -92,10 +97,21 @@ def run_lensopt(tree: Path, scene: Path, out: Path, extra: list[str], tmp: Path)
 def run_peer(python: str, zmx: Path, scene: Path, out: Path, tmp: Path) -> dict:
     js = tmp / "peer.json"
     js.unlink(missing_ok=True)
-    wall, _ = timed([python, str(HERE / "peer_deeplens.py"), str(zmx), str(scene), "whole", str(out), "--json", str(js),
-                  "--grid", "5x4", "--ks", "23", "--spp", "2048", "--threads", "1"], _env(None, tmp / "unused"), HERE)
+    cmd = [python, str(HERE / "peer_deeplens.py"), str(zmx), str(scene), "whole", str(out), "--json", str(js),
+           "--grid", "5x4", "--ks", "23", "--spp", "2048", "--threads", str(THREADS)]
+    wall, _ = timed(cmd, _env(None, tmp / "unused"), HERE)
     r = json.loads(js.read_text())
     return {"wall_s": wall, "peak_rss_mb": r["peak_rss_mb"], "torch_threads": r["threads"], "stages": r["timings"]}
+
+
+def make_scene(path: Path) -> Path:
+    """coffee.png mirrored to 4000 × 3000, written as an 8-bit sRGB PNG."""
+    from lensopt.imaging.io import read_image, write_image
+
+    img, info = read_image(ROOT / "lensopt" / "imaging" / "data" / "coffee.png")
+    big = np.pad(img, ((0, 3000 - img.shape[0]), (0, 4000 - img.shape[1]), (0, 0)), mode="symmetric")
+    write_image(path, big, info)
+    return path
 
 
 def read_codes(path: Path) -> np.ndarray:
@@ -114,19 +130,16 @@ def main() -> None:
     ap.add_argument("--before", type=Path, default=None, help="another checkout to run in the same session")
     ap.add_argument("--score", action="store_true", help="also time this tree's `--score` variant")
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--threads", type=int, default=1, help="OMP/MKL threads of every run (DeepLens: set_num_threads)")
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args()
+    global THREADS
+    THREADS = a.threads
     sys.path.insert(0, str(HERE))
     from cooke_zmx import cooke_zmx
 
-    from lensopt.imaging.io import read_image, write_image
-
     tmp = Path(tempfile.mkdtemp(prefix="sim_cmd_"))
-    img, info = read_image(ROOT / "lensopt" / "imaging" / "data" / "coffee.png")
-    big = np.pad(img, ((0, 3000 - img.shape[0]), (0, 4000 - img.shape[1]), (0, 0)), mode="symmetric")
-    scene = tmp / "scene.png"
-    write_image(scene, big, info)
-    del img, big
+    scene = make_scene(tmp / "scene.png")
     zmx = tmp / "cooke.zmx"
     zmx.write_text(cooke_zmx())
 
@@ -165,7 +178,7 @@ def main() -> None:
                    - read_codes(outs[f"lensopt simulate ({a.before})"]))
         compare["this tree vs --before: codes that differ"] = int((d > 0).sum())
         compare["this tree vs --before: largest difference"] = int(d.max())
-    print(f"load average before/after: {load0} / {load1}; repeats {a.repeats}; one thread each\n")
+    print(f"load average before/after: {load0} / {load1}; repeats {a.repeats}; threads {a.threads} each\n")
     print("| process | wall s median | min–max | peak RSS MB (median) | torch threads | PNG MB |")
     print("| --- | ---: | ---: | ---: | ---: | ---: |")
     for k, r in rows.items():
@@ -191,6 +204,7 @@ def main() -> None:
 
         write_text_atomic(a.json, json.dumps({"rows": rows, "ratios": ratios, "compare": compare,
                                               "load_before": load0, "load_after": load1, "repeats": a.repeats,
+                                              "threads": a.threads,
                                               "cpu_count": os.cpu_count()}, indent=2) + "\n")
 
 

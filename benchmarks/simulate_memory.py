@@ -1,0 +1,85 @@
+"""Where ``lensopt simulate`` holds its memory: the same command as benchmarks/simulate_command.py, run
+in this process with the resident set (VmRSS) before and after each stage and the stage's own peak (VmHWM,
+reset before the stage by writing 5 to /proc/self/clear_refs), so the stages' peaks can be told apart.
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/simulate_memory.py [SCENE.png]
+
+Without SCENE.png, coffee.png mirrored to 4000 × 3000 is written to a temporary folder first.
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+import tempfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+from procmem import vm_kb  # noqa: E402
+
+rows: list[str] = []
+_inner: list[float] = []  # per open call: the highest peak of the calls nested in it (their resets hide it)
+
+
+def _mb(field: str) -> float:
+    return vm_kb(field) / 1024
+
+
+def watch(module: object, name: str) -> None:
+    """Replace ``module.name`` by a wrapper that records the memory around each call."""
+    f = getattr(module, name)
+
+    @functools.wraps(f)
+    def wrapper(*args: object, **kwargs: object) -> object:
+        before = _mb("VmRSS")
+        _inner.append(0.0)
+        Path("/proc/self/clear_refs").write_text("5")
+        result = f(*args, **kwargs)
+        peak = max(_mb("VmHWM"), _inner.pop())
+        if _inner:
+            _inner[-1] = max(_inner[-1], peak)
+        rows.append(f"| {name} | {before:.0f} | {peak:.0f} | {_mb('VmRSS'):.0f} |")
+        return result
+
+    setattr(module, name, wrapper)
+
+
+def main() -> None:
+    if len(sys.argv) > 1:
+        scene = Path(sys.argv[1])
+    else:
+        from simulate_command import make_scene
+
+        scene = make_scene(Path(tempfile.mkdtemp(prefix="sim_mem_")) / "scene.png")
+    start = _mb("VmRSS")
+    import torch  # noqa: F401  (what every run imports first)
+
+    import lensopt.cli_imaging as ci
+    import lensopt.imaging.simulate as sm
+    from lensopt.cli import app
+
+    after_imports = _mb("VmRSS")
+    for name in ("read_image", "plan_scene", "run_plan", "write_image"):
+        watch(ci, name)
+    for name in ("compute_psfs", "build_psf_grid", "overlap_add_convolve"):
+        watch(sm, name)
+    out = Path(tempfile.mkdtemp(prefix="sim_mem_out_")) / "out.png"
+    sys.argv = ["lensopt", "simulate", str(ROOT / "specs" / "cooke_triplet.toml"), str(scene), "-o", str(out),
+                "--region", "full", "--grid", "5x4", "--effects", "-diffraction", "--json"]
+    try:
+        app()
+    except SystemExit as e:
+        if e.code:
+            raise
+    print(f"interpreter start {start:.0f} MB; after importing torch and the CLI {after_imports:.0f} MB",
+          file=sys.stderr)
+    print("| stage (nested calls listed first) | RSS before MB | peak during MB | RSS after MB |", file=sys.stderr)
+    print("| --- | ---: | ---: | ---: |", file=sys.stderr)
+    print("\n".join(rows), file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
