@@ -128,7 +128,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--peer-python", default=None, help="python of the DeepLens venv (setup_deeplens_venv.sh)")
     ap.add_argument("--before", type=Path, default=None, help="another checkout to run in the same session")
-    ap.add_argument("--score", action="store_true", help="also time this tree's `--score` variant")
+    ap.add_argument("--score", action="store_true", help="also time the `--score` variant (of --before too)")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--threads", type=int, default=1, help="OMP/MKL threads of every run (DeepLens: set_num_threads)")
     ap.add_argument("--json", type=Path, default=None)
@@ -151,6 +151,8 @@ def main() -> None:
         variants[f"lensopt simulate ({a.before})"] = ("lensopt", a.before.resolve(), [])
     if a.score:
         variants["lensopt simulate --score (this tree)"] = ("lensopt", ROOT, ["--score"])
+        if a.before is not None:
+            variants[f"lensopt simulate --score ({a.before})"] = ("lensopt", a.before.resolve(), ["--score"])
     runs: dict[str, list[dict]] = {k: [] for k in variants}
     outs = {k: tmp / f"out{i}.png" for i, k in enumerate(variants)}
     load0 = os.getloadavg()

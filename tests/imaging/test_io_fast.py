@@ -177,3 +177,24 @@ def test_simulate_command_imports_neither_scipy_nor_sympy(tmp_path: Path) -> Non
                        env=env, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
     assert (tmp_path / "o.png").is_file()
+
+
+@pytest.mark.parametrize("shape", [(11, 11), (12, 40, 3), (90, 31, 3), (53, 47), (41, 30, 1), (30, 20, 2)])
+def test_banded_scores_equal_scikit_image_on_the_whole_image(monkeypatch: pytest.MonkeyPatch,
+                                                            shape: tuple[int, ...]) -> None:
+    from skimage.metrics import peak_signal_noise_ratio, structural_similarity
+
+    import lensopt.imaging.metrics as metrics
+
+    monkeypatch.setattr(metrics, "BAND_ROWS", 7)  # many bands, and a last one of a few rows
+    rng = np.random.default_rng(len(shape) * 100 + shape[0])
+    a = rng.random(shape).astype(np.float32)
+    b = np.clip(a + 0.1 * rng.standard_normal(shape), 0, 1).astype(np.float32)
+    aa, bb = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    axis = -1 if len(shape) == 3 else None
+    if len(shape) == 3 and shape[-1] == 1:
+        aa, bb, axis = aa[..., 0], bb[..., 0], None
+    ref = structural_similarity(aa, bb, data_range=1.0, channel_axis=axis, gaussian_weights=True, sigma=1.5,
+                                use_sample_covariance=False)
+    assert metrics.ssim(a, b) == pytest.approx(ref, rel=1e-13, abs=1e-15)
+    assert metrics.psnr(a, b) == pytest.approx(peak_signal_noise_ratio(aa, bb, data_range=1.0), rel=1e-13)
