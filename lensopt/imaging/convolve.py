@@ -73,7 +73,7 @@ def overlap_add_convolve(
     psfs: Tensor,
     *,
     overlap: float = 0.25,
-    max_bytes: int = 64 * 2**20,
+    max_bytes: int = 128 * 2**20,
 ) -> Tensor:
     """Convolve ``image`` with a grid of PSFs.
 
@@ -82,7 +82,7 @@ def overlap_add_convolve(
         psfs: (H_g, W_g, C, K, K) PSF grid in image orientation (row 0 at the top of the image),
             K odd, each summing to 1; grid row r, column c applies to patch (r, c).
         overlap: OP, the fraction of a patch that overlaps its neighbour (S1.5.2).
-        max_bytes: bound on the FFT buffers of one batch of patches (the differentiable path).
+        max_bytes: bound on the FFT buffers of one batch of patches (small patches; with autograd, all).
 
     Returns:
         (C, H, W) convolved image, same dtype.
@@ -116,7 +116,7 @@ def overlap_add_convolve(
         valid = conv[..., 2 * r: 2 * r + (y1 - y0), 2 * r: 2 * r + (x1 - x0)]
         out[channels, y0:y1, x0:x1] += valid * (wy[i, y0:y1, None] * wx[j, None, x0:x1])
 
-    per_patch = c * fh * (fw // 2 + 1) * 8 * 2 + c * fh * fw * 4 * 2  # tile and kernel spectra, tile, result
+    per_patch = c * fh * (fw // 2 + 1) * 8 * 3 + c * fh * fw * 4 * 2  # 3 spectra (tile, kernel, product), 2 real
     grad = torch.is_grad_enabled() and (image.requires_grad or psfs.requires_grad)
     if not grad and per_patch > PLANE_MIN_BYTES:
         # Large patches one channel at a time through FFT buffers made once: faster than batches with one
