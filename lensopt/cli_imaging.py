@@ -98,10 +98,8 @@ def run_simulate(
             against = str(reference)
         else:
             ref, against = img, "the input scene"
-        ref_s, out_s = linear_to_srgb(ref), linear_to_srgb(res.image)
-        del ref
-        metrics = {"against": against, "psnr_db": psnr(ref_s, out_s), "ssim": ssim(ref_s, out_s),
-                   "space": "sRGB-encoded [0, 1]"}
+        metrics = {"against": against, "psnr_db": psnr(ref, res.image, transform=linear_to_srgb),
+                   "ssim": ssim(ref, res.image, transform=linear_to_srgb), "space": "sRGB-encoded [0, 1]"}
         timings["scores (PSNR, SSIM)"] = time.perf_counter() - t0
     return {"plan": plan_json, "timings": timings, "output": str(output), "output_encoding": encoding,
             "input_encoding": f"{info.encoding} {info.bits}-bit {'float' if info.is_float else 'integer'}"

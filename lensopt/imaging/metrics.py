@@ -11,6 +11,7 @@ weighted by their rows, are the mean of the whole map (to float64 rounding).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -24,28 +25,42 @@ SSIM_HALO = (SSIM_MIN_SIDE - 1) // 2
 BAND_ROWS = 256
 
 
-def psnr(reference: np.ndarray, test: np.ndarray, *, data_range: float = 1.0) -> float:
+Transform = Callable[[np.ndarray], np.ndarray]
+
+
+def _identity(x: np.ndarray) -> np.ndarray:
+    return x
+
+
+def psnr(reference: np.ndarray, test: np.ndarray, *, data_range: float = 1.0,
+         transform: Transform | None = None) -> float:
     """Peak signal-to-noise ratio in dB of ``test`` against ``reference`` (same shape): 10 log10(L² / MSE),
-    the mean squared error in float64 (as scikit-image), summed band by band."""
+    the mean squared error in float64 (as scikit-image), summed band by band. ``transform`` (elementwise,
+    e.g. ``linear_to_srgb``) is applied to each band of both images first: no transformed copies."""
     ref, tst = np.asarray(reference), np.asarray(test)
+    f = transform or _identity
     if ref.shape != tst.shape:
         raise ValueError(f"shapes differ: {ref.shape} vs {tst.shape}")
     if np.array_equal(ref, tst):
         return float("inf")  # identical images (scikit-image would divide by zero with a warning)
     total = 0.0
     for y in range(0, ref.shape[0], BAND_ROWS):
-        d = ref[y:y + BAND_ROWS].astype(np.float64) - tst[y:y + BAND_ROWS]
+        d = f(ref[y:y + BAND_ROWS]).astype(np.float64) - f(tst[y:y + BAND_ROWS])
         total += float(np.dot(d.ravel(), d.ravel()))
-    mse = total / ref.size
-    return float(10.0 * math.log10(data_range**2 / mse))
+    if total == 0.0:  # equal after the transform (e.g. both clipped)
+        return float("inf")
+    return float(10.0 * math.log10(data_range**2 / (total / ref.size)))
 
 
-def ssim(reference: np.ndarray, test: np.ndarray, *, data_range: float = 1.0) -> float:
+def ssim(reference: np.ndarray, test: np.ndarray, *, data_range: float = 1.0,
+         transform: Transform | None = None) -> float:
     """Structural similarity (H, W) or (H, W, C): Gaussian window σ = 1.5, as in Wang et al. 2004; NaN for
-    images smaller than the window (11 pixels). Scikit-image's value, computed in bands of rows."""
+    images smaller than the window (11 pixels). Scikit-image's value, computed in bands of rows;
+    ``transform`` as for ``psnr``."""
     from skimage.metrics import structural_similarity
 
     ref, tst = np.asarray(reference), np.asarray(test)
+    f = transform or _identity
     if min(ref.shape[0], ref.shape[1]) < SSIM_MIN_SIDE:  # smaller than the Gaussian window: not measurable
         return math.nan
     if ref.ndim == 2:
@@ -56,8 +71,8 @@ def ssim(reference: np.ndarray, test: np.ndarray, *, data_range: float = 1.0) ->
     for a in range(halo, h - halo, BAND_ROWS):
         b = min(a + BAND_ROWS, h - halo)
         for c in range(ref.shape[-1]):  # skimage: the mean over channels of each channel's mean
-            band_ref = ref[a - halo:b + halo, :, c].astype(np.float64)
-            band_tst = tst[a - halo:b + halo, :, c].astype(np.float64)
+            band_ref = f(ref[a - halo:b + halo, :, c]).astype(np.float64)
+            band_tst = f(tst[a - halo:b + halo, :, c]).astype(np.float64)
             total[c] += (b - a) * structural_similarity(band_ref, band_tst, data_range=data_range,
                                                         gaussian_weights=True, sigma=1.5,
                                                         use_sample_covariance=False)

@@ -198,3 +198,17 @@ def test_banded_scores_equal_scikit_image_on_the_whole_image(monkeypatch: pytest
                                 use_sample_covariance=False)
     assert metrics.ssim(a, b) == pytest.approx(ref, rel=1e-13, abs=1e-15)
     assert metrics.psnr(a, b) == pytest.approx(peak_signal_noise_ratio(aa, bb, data_range=1.0), rel=1e-13)
+
+
+def test_scores_with_a_transform_equal_scores_of_the_transformed_images() -> None:
+    from lensopt.imaging.metrics import psnr, ssim
+
+    rng = np.random.default_rng(9)
+    a = (rng.random((40, 33, 3)) * 1.2).astype(np.float32)  # some values above 1: clipped by the transform
+    b = np.clip(a + 0.05 * rng.standard_normal(a.shape), 0, None).astype(np.float32)
+    sa, sb = linear_to_srgb(a), linear_to_srgb(b)
+    assert psnr(a, b, transform=linear_to_srgb) == psnr(sa, sb)
+    assert ssim(a, b, transform=linear_to_srgb) == ssim(sa, sb)
+    c = a.copy()
+    c[a > 1] = 5.0  # differs from a only where both encode to 1
+    assert psnr(a, c, transform=linear_to_srgb) == float("inf")
