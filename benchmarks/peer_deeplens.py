@@ -11,7 +11,8 @@ imgsim.conv_psf_map (its non-overlapping patch convolution), timed by stage.
 ``analysis_rendering`` path does it: read the 8-bit PNG with PIL (``Image.open(..).convert("RGB")``,
 ``np.array``), ``torch.from_numpy(..).permute(2, 0, 1).unsqueeze(0).float() / 255``, PSF map
 (``psf_map_rgb``), ``conv_psf_map``, and write the PNG as torchvision's ``save_image`` does
-(``mul(255).add_(0.5).clamp_(0, 255)`` → uint8 → PIL ``Image.save``, PNG at PIL's default zlib level);
+(``mul(255).add_(0.5).clamp_(0, 255)`` → uint8 → PIL ``Image.save``, PNG at PIL's default zlib level;
+``--writer cv2``: ``cv2.imwrite`` instead, OpenCV's default PNG level 1);
 torchvision is not installed here, so those three lines are inlined. No PSNR/SSIM (``lensopt simulate``
 does not score by default either). The whole process (Python start and imports included) is timed by the
 caller (benchmarks/simulate_command.py); ``--json`` gets the stage times and VmHWM.
@@ -53,6 +54,8 @@ def main() -> None:
     ap.add_argument("--ours-grid")
     ap.add_argument("--save-image")
     ap.add_argument("--json")
+    ap.add_argument("--writer", choices=["pil", "cv2"], default="pil",
+                    help="whole: PNG writer (pil = save_image's; cv2 = cv2.imwrite, zlib level 1 by default)")
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
     gw, gh = (int(v) for v in a.grid.split("x"))
@@ -113,7 +116,13 @@ def whole(a: argparse.Namespace, gw: int, gh: int) -> None:
     t1 = time.perf_counter()
     # torchvision.utils.save_image(out, path) for one image: make_grid returns it; then these lines.
     ndarr = out[0].mul(255).add_(0.5).clamp_(0, 255).permute(1, 2, 0).to("cpu", torch.uint8).numpy()
-    Image.fromarray(ndarr).save(a.out)
+    if a.writer == "pil":
+        Image.fromarray(ndarr).save(a.out)
+    else:  # what a user who wants a fast write might use instead (OpenCV's default PNG level is 1)
+        import cv2
+
+        if not cv2.imwrite(a.out, cv2.cvtColor(ndarr, cv2.COLOR_RGB2BGR)):
+            raise SystemExit(f"cv2.imwrite failed: {a.out}")
     t["write image"] = time.perf_counter() - t1
     t["in-process total"] = time.perf_counter() - t0
     if a.json:

@@ -94,11 +94,11 @@ def run_lensopt(tree: Path, scene: Path, out: Path, extra: list[str], tmp: Path)
     return {"wall_s": wall, **json.loads(hwm.read_text()), "stages": stage_table(stdout)}
 
 
-def run_peer(python: str, zmx: Path, scene: Path, out: Path, tmp: Path) -> dict:
+def run_peer(python: str, zmx: Path, scene: Path, out: Path, tmp: Path, writer: str = "pil") -> dict:
     js = tmp / "peer.json"
     js.unlink(missing_ok=True)
     cmd = [python, str(HERE / "peer_deeplens.py"), str(zmx), str(scene), "whole", str(out), "--json", str(js),
-           "--grid", "5x4", "--ks", "23", "--spp", "2048", "--threads", str(THREADS)]
+           "--grid", "5x4", "--ks", "23", "--spp", "2048", "--threads", str(THREADS), "--writer", writer]
     wall, _ = timed(cmd, _env(None, tmp / "unused"), HERE)
     r = json.loads(js.read_text())
     return {"wall_s": wall, "peak_rss_mb": r["peak_rss_mb"], "torch_threads": r["threads"], "stages": r["timings"]}
@@ -127,6 +127,7 @@ def read_codes(path: Path) -> np.ndarray:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--peer-python", default=None, help="python of the DeepLens venv (setup_deeplens_venv.sh)")
+    ap.add_argument("--peer-cv2", action="store_true", help="also DeepLens with cv2.imwrite as the PNG writer")
     ap.add_argument("--before", type=Path, default=None, help="another checkout to run in the same session")
     ap.add_argument("--score", action="store_true", help="also time the `--score` variant (of --before too)")
     ap.add_argument("--repeats", type=int, default=3)
@@ -145,7 +146,9 @@ def main() -> None:
 
     variants: dict[str, tuple] = {}
     if a.peer_python:
-        variants["DeepLens 2.5.6 (PIL in, psf_map_rgb + conv_psf_map, save_image out)"] = ("peer",)
+        variants["DeepLens 2.5.6 (PIL in, psf_map_rgb + conv_psf_map, save_image out)"] = ("peer", "pil")
+        if a.peer_cv2:
+            variants["DeepLens 2.5.6, PNG written by cv2.imwrite (level 1)"] = ("peer", "cv2")
     variants["lensopt simulate (this tree)"] = ("lensopt", ROOT, [])
     if a.before is not None:
         variants[f"lensopt simulate ({a.before})"] = ("lensopt", a.before.resolve(), [])
@@ -159,7 +162,7 @@ def main() -> None:
     for rep in range(a.repeats):
         for name, v in variants.items():  # interleaved
             if v[0] == "peer":
-                runs[name].append(run_peer(a.peer_python, zmx, scene, outs[name], tmp))
+                runs[name].append(run_peer(a.peer_python, zmx, scene, outs[name], tmp, v[1]))
             else:
                 runs[name].append(run_lensopt(v[1], scene, outs[name], v[2], tmp))
         print(f"round {rep + 1}/{a.repeats} done", file=sys.stderr)
