@@ -11,8 +11,8 @@ per-pixel power), straight into a channel-planar buffer (``read_image`` returns 
 a (C, H, W) array, the layout the simulation convolves); integer files are written from an integer
 buffer encoded in row bands and rounded as OpenImageIO rounds, so the files hold the same codes as
 converting the whole float image at once (up to exact float32 ties, see ``encode_integer``); PNGs are
-compressed at zlib level 1 with the Paeth filter (``PNG_OPTIONS``: about 8× faster to write than
-OpenImageIO's default, level 6 with adaptive filtering; files ≈ 13 % larger; both lossless).
+compressed at zlib level 1 with the Paeth filter (``PNG_OPTIONS``; OpenImageIO's default is level 6
+with adaptive filtering: files ≈ 13 % smaller, several times slower to write; both lossless).
 """
 
 from __future__ import annotations
