@@ -83,11 +83,14 @@ def stage_table(stdout: str) -> dict[str, float]:
     return {name: float(sec) for name, sec in rows}
 
 
+EFFECTS = "-diffraction"
+
+
 def run_lensopt(tree: Path, scene: Path, out: Path, extra: list[str], tmp: Path) -> dict:
     hwm = tmp / "hwm.json"
     hwm.unlink(missing_ok=True)
     args = [str(ROOT / "specs" / "cooke_triplet.toml"), str(scene), "-o", str(out), "--region", "full",
-            "--grid", "5x4", "--effects", "-diffraction", *extra]
+            "--grid", "5x4", f"--effects={EFFECTS}", *extra]
     # cwd = the tree: ``python -c`` puts the working directory first on sys.path, before PYTHONPATH.
     wall, stdout = timed([sys.executable, "-c", _LENSOPT.format(bench=str(HERE)), "simulate", *args],
                          _env(tree, hwm), tree)
@@ -131,11 +134,12 @@ def main() -> None:
     ap.add_argument("--before", type=Path, default=None, help="another checkout to run in the same session")
     ap.add_argument("--score", action="store_true", help="also time the `--score` variant (of --before too)")
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--effects", default=EFFECTS, help="lensopt's --effects (the DeepLens peer has none)")
     ap.add_argument("--threads", type=int, default=1, help="OMP/MKL threads of every run (DeepLens: set_num_threads)")
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args()
-    global THREADS
-    THREADS = a.threads
+    global THREADS, EFFECTS
+    THREADS, EFFECTS = a.threads, a.effects
     sys.path.insert(0, str(HERE))
     from cooke_zmx import cooke_zmx
 
@@ -209,7 +213,7 @@ def main() -> None:
 
         write_text_atomic(a.json, json.dumps({"rows": rows, "ratios": ratios, "compare": compare,
                                               "load_before": load0, "load_after": load1, "repeats": a.repeats,
-                                              "threads": a.threads,
+                                              "threads": a.threads, "effects": a.effects,
                                               "cpu_count": os.cpu_count()}, indent=2) + "\n")
 
 

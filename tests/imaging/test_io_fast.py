@@ -212,3 +212,37 @@ def test_scores_with_a_transform_equal_scores_of_the_transformed_images() -> Non
     c = a.copy()
     c[a > 1] = 5.0  # differs from a only where both encode to 1
     assert psnr(a, c, transform=linear_to_srgb) == float("inf")
+
+
+def test_effects_in_bands_equal_one_whole_image_band(monkeypatch: pytest.MonkeyPatch) -> None:
+    # One band covering the image is the whole-image computation that the effects did before.
+    import lensopt.imaging.effects as effects
+    from lensopt.imaging.pilot import run_pilot
+    from lensopt.imaging.scene import parse_region
+    from lensopt.imaging.simulate import sensor_of
+    from lensopt.spec import build, camera_of, load_spec
+
+    camera = camera_of(build(load_spec(ROOT / "specs" / "cooke_triplet.toml")))
+    img = torch.from_numpy(np.random.default_rng(11).random((3, 45, 61), dtype=np.float32))
+    sensor, _ = sensor_of(camera, 61, 45)
+    region = parse_region("corner", sensor, 61, 45)
+    pilot = run_pilot(camera.lens, camera.system, camera.system.wavelength_weights)
+    results = {}
+    for rows in (10**9, 7):
+        monkeypatch.setattr(effects, "BAND_ROWS", rows)
+        results[rows] = (effects.warp_distortion(img, pilot, region, sensor),
+                         effects.apply_relative_illumination(img, pilot, region, sensor))
+    for whole, banded in zip(results[10**9], results[7], strict=True):
+        assert torch.equal(whole, banded)
+    assert not torch.equal(results[7][0], img) and not torch.equal(results[7][1], img)
+
+
+def test_noise_is_the_image_plus_scaled_seeded_gaussian() -> None:
+    from lensopt.imaging.effects import add_noise
+
+    img = torch.rand(3, 20, 30, generator=torch.Generator().manual_seed(1))
+    expected = img + 0.05 * float(img.max()) * torch.randn(img.shape, generator=torch.Generator().manual_seed(4))
+    assert torch.equal(add_noise(img, 0.05, seed=4), expected)
+    x = img.clone().requires_grad_(True)
+    add_noise(x, 0.05, seed=4).sum().backward()  # differentiable rendering adds noise too
+    assert torch.equal(x.grad, torch.ones_like(img))
