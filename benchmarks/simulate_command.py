@@ -128,6 +128,7 @@ def read_codes(path: Path) -> np.ndarray:
 
 
 def main() -> None:
+    global THREADS, EFFECTS
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--peer-python", default=None, help="python of the DeepLens venv (setup_deeplens_venv.sh)")
     ap.add_argument("--peer-cv2", action="store_true", help="also DeepLens with cv2.imwrite as the PNG writer")
@@ -138,7 +139,6 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1, help="OMP/MKL threads of every run (DeepLens: set_num_threads)")
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args()
-    global THREADS, EFFECTS
     THREADS, EFFECTS = a.threads, a.effects
     sys.path.insert(0, str(HERE))
     from cooke_zmx import cooke_zmx
