@@ -163,7 +163,7 @@ def test_the_microscope_study_lens_meets_table_s12() -> None:
 
 def test_the_raw_cmount_lens_is_made_by_two_specs_in_the_repo(tmp_path: Path) -> None:
     # lenses/cmount_4p_raw.json = specs/cmount_4p_raw.toml (stage 1, the 54 steps of the recorded run,
-    # benchmarks/results_cmount_raw.json) then specs/cmount_4p_raw_polish.toml (stage 2: 4 steps with the
+    # benchmarks/results_cmount_raw.json) then specs/stages/cmount_4p_raw_polish.toml (stage 2: 4 steps with the
     # distortion weight 1000 and max_percent 1.95, benchmarks/results_cmount_raw_polish.json). The
     # 1-hour stage 1 is not re-run here: its output is stood in for by the shipped lens, which shows that
     # the polish spec starts from stage 1's output file and that its settings are the ones the shipped
@@ -177,14 +177,14 @@ def test_the_raw_cmount_lens_is_made_by_two_specs_in_the_repo(tmp_path: Path) ->
     assert stage1.surfaces == load_spec(ROOT / "lenses" / "cmount_4p.json").surfaces  # starts from the spot lens
     polish_file = ROOT / "specs" / "cmount_4p_raw_polish.toml"
     text = polish_file.read_text()
-    assert 'start = "../out/cmount_4p_raw_stage1.json"' in text
+    assert 'start = "../../out/cmount_4p_raw_stage1.json"' in text
     assert "lensopt optimize specs/cmount_4p_raw.toml -o out/cmount_4p_raw_stage1.json --seed 0" in text
-    (tmp_path / "specs").mkdir()
+    (tmp_path / "specs" / "stages").mkdir(parents=True)
     (tmp_path / "out").mkdir()
-    (tmp_path / "specs" / polish_file.name).write_text(text)
+    (tmp_path / "specs" / "stages" / polish_file.name).write_text(text)
     shipped = load_spec(ROOT / "lenses" / "cmount_4p_raw.json")
     (tmp_path / "out" / "cmount_4p_raw_stage1.json").write_text(dump_json(shipped))
-    polish = load_spec(tmp_path / "specs" / polish_file.name)
+    polish = load_spec(tmp_path / "specs" / "stages" / polish_file.name)
     assert polish.optimize == shipped.optimize
     assert polish.optimize.steps == polish_record["steps"] == 4
     assert polish.optimize.constraints.distortion.weight == 1000.0
