@@ -31,8 +31,8 @@ from pathlib import Path
 
 import torch
 
+from lensopt.design import build_problem
 from lensopt.optics.sampling import PupilSampling
-from lensopt.optim import Problem
 from lensopt.optim.report import constraint_report
 from lensopt.optim.run import _next_batch, make_optimizer
 from lensopt.spec import load_spec
@@ -43,7 +43,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def run(method: str, budget: float, every: float, count: int, lr: float) -> dict:
     spec = load_spec(ROOT / "specs" / "cmount_4p_raw.toml")
     spec.optimize = spec.optimize.model_copy(update={"adam": spec.optimize.adam.model_copy(update={"lr": lr})})
-    p = Problem(spec, seed=0, method=method)
+    p = build_problem(spec, seed=0, method=method)
     state = make_optimizer(p, p.theta0, method)
     scale = p.row_scale(0.0)
     steps, evals = [], []

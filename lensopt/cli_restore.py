@@ -256,7 +256,7 @@ def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed:
     """``lensopt optimize`` with ``objective = "restored"``: the joint run, then the lens (and, with
     --checkpoint, the network) written; rank 0 only writes and prints under torchrun."""
     from lensopt.cli import console, err_console
-    from lensopt.optim.joint_run import run_joint
+    from lensopt.design.joint_run import run_joint
     from lensopt.spec import save_json
 
     if output.suffix.lower() != ".json":

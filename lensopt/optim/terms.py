@@ -104,7 +104,7 @@ def _glass_weight(name: str) -> Callable[[Problem], float | None]:
 
 
 def _refracting(c: TermContext) -> list[int]:
-    return [s for s in c.problem.interfaces if not c.problem.spec.surfaces[s].type == "plane"]
+    return [s for s in c.problem.interfaces if not c.problem.surfaces[s].plane]
 
 
 register_term(Term(
