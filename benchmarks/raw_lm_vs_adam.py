@@ -84,7 +84,11 @@ def plot(res: dict, path: Path) -> None:
     fig, ax = plt.subplots(1, 2, figsize=(10, 4))
     for r in res["runs"]:
         name = label(r)
-        ax[0].plot([s[0] for s in r["step_log"]], [s[2] for s in r["step_log"]], ".-", label=name)
+        t, loss = [s[0] for s in r["step_log"]], [s[2] for s in r["step_log"]]
+        k = 25  # running mean over 25 steps (each step's batch differs), the raw values faint behind it
+        mean = [sum(loss[max(0, i - k + 1): i + 1]) / len(loss[max(0, i - k + 1): i + 1]) for i in range(len(loss))]
+        (line,) = ax[0].plot(t, mean, "-", lw=1.8, label=f"{name}, mean of {k} steps")
+        ax[0].plot(t, loss, ".", ms=2, alpha=0.25, color=line.get_color())
         ax[1].plot([e[0] for e in r["evals"]], [e[2] for e in r["evals"]], "o-", label=name)
     ax[0].set(xlabel="optimizer CPU time (s, 1 thread)", ylabel="image loss L of the step's batch (MSE)",
               title="loss (batches change every step)")
