@@ -136,7 +136,7 @@ class Parameterization:
     # ------------------------------------------------------------------------------------ θ ↔ lens
 
     def initial(self) -> Tensor:
-        """θ of the spec's own values."""
+        """θ of the start lens's own values."""
         lens, a = self.base, self.alpha
         vals: list[Tensor] = []
         for v in self.variables:
@@ -189,7 +189,7 @@ class Parameterization:
         return torch.stack(rows) if rows else torch.zeros(0, d, dtype=theta.dtype, device=theta.device)
 
     def lens(self, theta: Tensor) -> Lens:
-        """The lens for θ (solved quantities still at their spec values)."""
+        """The lens for θ (solved quantities still at their start values)."""
         base, a = self.base, self.alpha
         S = base.num_surfaces
         curv, thick, conic = list(base.curvature.unbind()), list(base.thickness.unbind()), list(base.conic.unbind())
