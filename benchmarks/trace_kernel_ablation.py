@@ -44,14 +44,12 @@ from lensopt.optics.trace import KernelOptions, Rays, index_ratio, trace, trace_
 
 
 def _kernel_temporaries(codes: list[str]) -> str:
-    """``auto tmpN`` definitions in the first vectorized loop of the largest generated kernel."""
+    """``auto tmpN`` definitions in the body of the largest loop over rays in the generated C++
+    (the vectorized main loop; its scalar tail repeats the same work and is not counted)."""
     best = 0
     for code in codes:
-        for kernel in code.split("async_compile.cpp_pybinding")[1:]:
-            loop = kernel.split("x0+=static_cast<int64_t>(")
-            if len(loop) < 2:
-                continue
-            body = loop[1].split(".store(")[0]
+        for loop in code.split("for(int64_t x0=")[1:]:
+            body = loop.split(".store(")[0]
             best = max(best, len(re.findall(r"auto tmp\d+ =", body)))
     return str(best) if best else "–"
 

@@ -30,10 +30,10 @@ selects).
 
 One compiled function is cached per lens *structure* (surface kinds, stop, ``upto``, ``record``,
 Newton cap, dtype, device, number of wavelengths, which quadrics skip the far root). Changing
-tensor values (an optimizer step) reuses it; changing the
-number of rays recompiles once, after which the ray count is a dynamic dimension. Each structure
-gets its own code object, so many structures in one process never hit Dynamo's per-code-object
-recompile limit (which would silently fall back to eager).
+tensor values (an optimizer step) reuses it (a conic crossing κ = −1 selects another one);
+changing the number of rays recompiles once, after which the ray count is a dynamic dimension.
+Each structure gets its own code object, so many structures in one process never hit Dynamo's
+per-code-object recompile limit (which would silently fall back to eager).
 
 If compilation is unavailable (no C++ compiler, unsupported Python, a backend error), the eager
 ``trace`` runs instead and a warning is logged once per structure; ``fallback=False`` raises

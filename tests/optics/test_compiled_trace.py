@@ -87,6 +87,9 @@ def test_compiled_equals_eager_with_every_failure_reason() -> None:
     assert torch.equal(comp2.status, eager2.status)
     assert _close(comp2.pos, eager2.pos)
     assert len(compiled._cache) == 1
+    # The kernel skips the far root on the sphere, the plane and the asphere's slot (Newton there),
+    # not on the hyperboloid (κ = −2.5): tests/optics/test_trace_kernel.py shows why it must not.
+    assert next(iter(compiled._cache))[-1] == (True, True, False, True)
 
 
 def test_falls_back_to_eager_when_compilation_fails(monkeypatch, caplog) -> None:
