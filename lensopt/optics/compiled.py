@@ -85,7 +85,8 @@ def compiled_trace(
             False re-raises the compilation error.
 
     Returns:
-        The same ``RayTrace`` as ``trace``: pos/dir (*B, 3), status/backtrack (*B), hits.
+        The same ``RayTrace`` as ``trace``: pos/dir (*B, 3), status/backtrack (*B), hits; pos, dir
+        and the hits' vectors stored component-major ((*B, 3) views of (3, *B) planes).
 
     Compilation takes tens of seconds the first time per structure (Inductor caches kernels on
     disk, so later processes are faster); use it when the trace is called on ≳1e5 rays or many times.
