@@ -71,9 +71,9 @@ def quadric_flag_xyz(p: Vec3, d: Vec3, c: Tensor, k: Tensor, *, shortcuts: bool 
     t0, pz, dz, rho, a, q, t, hit, on_sheet = _near_root(p, d, c, k)
     if shortcuts and bool(on_sheet.all()):
         return torch.where(hit > 0, t0 + t, 0.0), hit
-    # The other root, q / a: still needed after the transfer when the ray crosses the vertex plane
-    # beyond the centre of curvature (b < 0 going forward); then C / q is the far side of the
-    # sphere and the sag-branch crossing is q / a.
+    # The other root, q / a: where the near root C / q is off the sag branch, the sag-branch crossing
+    # can be q / a on a hyperboloid (1 + κ < 0: the roots can lie on both sides of the vertex plane,
+    # the near one on the second sheet); for 1 + κ ≥ 0 it never is (``quadric_near_xyz``).
     eps = torch.finfo(q.dtype).eps
     t_other = _safe_div(q, a)
     other_ok = torch.where(a.abs() > eps, torch.where(rho * c * (pz + t_other * dz) <= 1.0, hit.new_ones(()), 0.0),
