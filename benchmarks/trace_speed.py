@@ -252,6 +252,17 @@ def measure(n: int, args: argparse.Namespace, notes: list[str]) -> list[str]:
             fn, prep = configs[name]
             times[name].append(timed(fn, prep)[0])
     peer_rate = None if args.no_peer else n_rays / statistics.median(times["optiland|float64"])
+    sketch = "sketch (ceiling, not lensopt)|float64"
+    if sketch in times:
+        # Issue 14's goal is a ratio to the sketch in the same run: median time / the sketch's median,
+        # and the median of the per-repeat ratios (each repeat runs every configuration once).
+        base = statistics.median(times[sketch])
+        for name in names:
+            if name.startswith("lensopt compiled"):
+                per = statistics.median(t / b for t, b in zip(times[name], times[sketch], strict=True))
+                notes.append(f"time / the sketch's at {n_rays:.1e} rays, {name.replace('|', ' ')}: "
+                             f"{statistics.median(times[name]) / base:.2f}× (medians), {per:.2f}× (median of "
+                             f"the {len(times[name])} per-repeat ratios)")
     rows = []
     for name in names:
         tracer, dt = name.split("|")

@@ -12,8 +12,8 @@ from torch import Tensor
 
 from lensopt.optics.surfaces import sag
 
-__all__ = ["intersect_quadric", "intersect_asphere", "quadric_xyz", "quadric_flag_xyz", "asphere_xyz", "Vec3",
-           "NEWTON_ITERATIONS"]
+__all__ = ["intersect_quadric", "intersect_asphere", "quadric_xyz", "quadric_flag_xyz", "quadric_near_xyz",
+           "asphere_xyz", "Vec3", "NEWTON_ITERATIONS"]
 
 NEWTON_ITERATIONS = 12
 """Fixed iteration cap: Newton from the conic start converges in 3–5 steps in float64."""
@@ -68,6 +68,42 @@ def quadric_flag_xyz(p: Vec3, d: Vec3, c: Tensor, k: Tensor, *, shortcuts: bool 
     The values are those of the boolean formulation. ``shortcuts`` (eager only, no transform
     watching): skip the far root when every ray meets the sag branch with the near one (same values).
     """
+    t0, pz, dz, rho, a, q, t, hit, on_sheet = _near_root(p, d, c, k)
+    if shortcuts and bool(on_sheet.all()):
+        return torch.where(hit > 0, t0 + t, 0.0), hit
+    # The other root, q / a: where the near root C / q is off the sag branch, the sag-branch crossing
+    # can be q / a on a hyperboloid (1 + κ < 0: the roots can lie on both sides of the vertex plane,
+    # the near one on the second sheet); for 1 + κ ≥ 0 it never is (``quadric_near_xyz``).
+    eps = torch.finfo(q.dtype).eps
+    t_other = _safe_div(q, a)
+    other_ok = torch.where(a.abs() > eps, torch.where(rho * c * (pz + t_other * dz) <= 1.0, hit.new_ones(()), 0.0),
+                           0.0)
+    t = torch.where(on_sheet, t, torch.where(hit * other_ok > 0, t_other, t))
+    hit = torch.where(on_sheet, hit, hit * other_ok)
+    return torch.where(hit > 0, t0 + t, 0.0), hit
+
+
+def quadric_near_xyz(p: Vec3, d: Vec3, c: Tensor, k: Tensor) -> tuple[Tensor, Tensor]:
+    """``quadric_flag_xyz`` without the far root, for a sphere, an ellipsoid or a paraboloid
+    (1 + κ ≥ 0; the caller decides from the prescription, e.g. the compiled trace's structure).
+
+    There the far root never yields a hit: after the transfer to the vertex plane both roots lie on
+    the same side of it (their product C/a = (x² + y²)/(dx² + dy² + (1 + κ) dz²) ≥ 0) and the far
+    one at least as far from it (|q/a| ≥ |C/q| since q² ≥ b² ≥ aC), so where the near root is off the
+    sag branch ((1 + κ) c z > 1) the far one is too, and ``quadric_flag_xyz`` reports a miss. This
+    function reports the same miss without computing the far root (a division and a dozen selects
+    per ray): the same ``t`` and ``hit`` bit for bit, except for a ray tangent to the quadric on the
+    boundary of the sag branch, where rounding decides either way. Hyperboloids (1 + κ < 0) need the
+    full solve (their roots can lie on both sides of the vertex plane).
+    """
+    t0, _, _, _, _, _, t, hit, on_sheet = _near_root(p, d, c, k)
+    hit = torch.where(on_sheet, hit, 0.0)
+    return torch.where(hit > 0, t0 + t, 0.0), hit
+
+
+def _near_root(p: Vec3, d: Vec3, c: Tensor, k: Tensor):
+    """The shared part of the quadric solves: transfer to the vertex plane, the near root C / q,
+    whether the ray hits (float flag) and whether the near root lies on the sag branch (mask)."""
     rho = 1.0 + k
     px, py, pz = p
     dx, dy, dz = d
@@ -83,20 +119,13 @@ def quadric_flag_xyz(p: Vec3, d: Vec3, c: Tensor, k: Tensor, *, shortcuts: bool 
     q = b + torch.where(b >= 0, root, -root)
     t = _safe_div(cc, q)
     eps = torch.finfo(q.dtype).eps
-    hit = torch.where(disc >= 0, torch.where(q.abs() > eps, 1.0, 0.0), 0.0)
+    # The flag in the rays' dtype (``torch.where(m, 1.0, 0.0)`` alone would be float32, the default
+    # dtype, and a fused float64 kernel would convert masks and flags between the two lane formats).
+    hit = torch.where(disc >= 0, torch.where(q.abs() > eps, q.new_ones(()), 0.0), 0.0)
     # The sag formula's branch satisfies (1 + κ) c z ≤ 1; the far side of a sphere/ellipsoid and the
     # second sheet of a hyperboloid do not.
     on_sheet = rho * c * (pz + t * dz) <= 1.0
-    if shortcuts and bool(on_sheet.all()):
-        return torch.where(hit > 0, t0 + t, 0.0), hit
-    # The other root, q / a: still needed after the transfer when the ray crosses the vertex plane
-    # beyond the centre of curvature (b < 0 going forward); then C / q is the far side of the
-    # sphere and the sag-branch crossing is q / a.
-    t_other = _safe_div(q, a)
-    other_ok = torch.where(a.abs() > eps, torch.where(rho * c * (pz + t_other * dz) <= 1.0, 1.0, 0.0), 0.0)
-    t = torch.where(on_sheet, t, torch.where(hit * other_ok > 0, t_other, t))
-    hit = torch.where(on_sheet, hit, hit * other_ok)
-    return torch.where(hit > 0, t0 + t, 0.0), hit
+    return t0, pz, dz, rho, a, q, t, hit, on_sheet
 
 
 def intersect_asphere(

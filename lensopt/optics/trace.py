@@ -16,13 +16,14 @@ from enum import IntEnum
 import torch
 from torch import Tensor
 
-from lensopt.optics.interact import bend_xyz
-from lensopt.optics.intersect import NEWTON_ITERATIONS, asphere_xyz, quadric_flag_xyz
+from lensopt.optics.interact import bend_xyz, refract_ratio_xyz
+from lensopt.optics.intersect import NEWTON_ITERATIONS, asphere_xyz, quadric_flag_xyz, quadric_near_xyz
 from lensopt.optics.lens import Lens
 from lensopt.optics.placement import surface_frames, to_global, to_local
 from lensopt.optics.surfaces import conic_normal_xyz, normal_xyz, phase_slope, sag
 
-__all__ = ["Status", "REASONS", "Rays", "SurfaceHit", "RayTrace", "trace", "failure_counts"]
+__all__ = ["Status", "REASONS", "Rays", "SurfaceHit", "RayTrace", "trace", "failure_counts", "KernelOptions",
+           "trace_kernel", "index_ratio"]
 
 
 class Status(IntEnum):
@@ -140,13 +141,33 @@ def trace(
     return _trace(lens, rays, pos, dir, upto, record, newton_iterations, shortcuts=False)
 
 
+def trace_kernel(lens: Lens, rays: Rays, options: KernelOptions, *, upto: int | None = None, record: bool = False,
+                 newton_iterations: int = NEWTON_ITERATIONS, ratio: Tensor | None = None) -> RayTrace:
+    """``trace`` in the compiled kernel's formulation (``KernelOptions``): the function that
+    ``optics.compiled`` compiles; eager, it lets tests check the formulation without a compiler.
+    Never chunked. ``ratio``: ``index_ratio(lens)``, computed by the caller (default: here); the
+    compiled trace passes it in, so that the kernel loads 3 numbers per surface instead of redoing
+    the table's divisions for every block of rays (Inductor inlines such scalar work in the loop)."""
+    pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
+    return _trace(lens, rays, pos, dir, upto, record, newton_iterations, shortcuts=False, kernel=options,
+                  ratio=index_ratio(lens) if ratio is None else ratio)
+
+
+def index_ratio(lens: Lens) -> Tensor:
+    """(S, W) n/n' at each surface per wavelength (the refraction table of ``trace_kernel``)."""
+    return lens.index[:-1] * (1.0 / lens.index[1:])
+
+
 def _trace(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, upto: int | None, record: bool, newton_iterations: int,
-           *, shortcuts: bool) -> RayTrace:
+           *, shortcuts: bool, kernel: KernelOptions | None = None, ratio: Tensor | None = None) -> RayTrace:
     """The trace of ``trace``. ``shortcuts`` (eager, nothing watching: the chunked path) skips work
     that a look at the values shows cannot change them (a select whose condition holds for every
     ray, the far root of a quadric that no ray needs): the same numbers, fewer full-array passes.
-    Never inside torch.compile, vmap or forward mode, where a branch on values is not allowed."""
+    Never inside torch.compile, vmap or forward mode, where a branch on values is not allowed.
+    ``kernel``: the compiled trace's formulation (``KernelOptions``, with its ``ratio`` table); None:
+    the reference one."""
     compiling = torch.compiler.is_compiling()
+    fast = kernel is not None
     batch = pos.shape[:-1]
     # First failure code and the backtracking flag, kept in the rays' float dtype (int64 and bool
     # on return), and every mask used only as the condition of a select, never combined by boolean
@@ -171,6 +192,10 @@ def _trace(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, upto: int | None, r
     x, y, z = pos.unbind(-1)
     dx, dy, dz = dir.unbind(-1)
     hits: list[SurfaceHit] = []
+    # The compiled kernel writes its outputs component-major ((*B, 3) views of (3, *B) planes, as
+    # ``compiled.component_major_rays`` stores rays): vector stores instead of strided scalar ones.
+    planes = fast and kernel.component_major
+    stack = (lambda v: torch.stack(v, 0).movedim(0, -1)) if planes else (lambda v: torch.stack(v, -1))
     last = lens.num_surfaces - 1 if upto is None else upto
     for s in range(last + 1):
         shape = lens.shapes[s]
@@ -187,7 +212,10 @@ def _trace(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, upto: int | None, r
             status, ok = _fail(status, ok, ~defined, Status.MISSED, shortcuts)
             status, ok = _fail(status, ok, ~converged, Status.NEWTON, shortcuts)
         else:
-            t, hit = quadric_flag_xyz((x, y, lz), (dx, dy, dz), c, k, shortcuts=shortcuts)
+            if fast and kernel.near_only[s]:
+                t, hit = quadric_near_xyz((x, y, lz), (dx, dy, dz), c, k)
+            else:
+                t, hit = quadric_flag_xyz((x, y, lz), (dx, dy, dz), c, k, shortcuts=shortcuts)
             status, ok = _fail(status, ok, hit == 0, Status.MISSED, shortcuts)
         if s > 0:
             backtrack = _flag(backtrack, ok, t < 0, shortcuts)
@@ -216,9 +244,13 @@ def _trace(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, upto: int | None, r
             # m λ/(2π) ∇φ with ∇φ = 2 dφ/du (x, y, 0): finite at r = 0 (S16–S17).
             g = shape.order * lam_mm / math.pi * phase_slope(u, lens.phase[s])
             grating = (g * hx, g * hy)
-        n1 = _per_ray(lens.index[s], rays.wavelength, wl_select)
-        inv_n2 = _per_ray(inv_index[s + 1], rays.wavelength, wl_select)
-        d_out, cos2_in, cos2_out, tir = bend_xyz((dx, dy, dz), normal, n1, inv_n2, grating)
+        if fast and kernel.ratio_refraction and grating is None:
+            mu = _per_ray(ratio[s], rays.wavelength, wl_select)
+            d_out, cos2_in, cos2_out, tir = refract_ratio_xyz((dx, dy, dz), normal, mu)
+        else:
+            n1 = _per_ray(lens.index[s], rays.wavelength, wl_select)
+            inv_n2 = _per_ray(inv_index[s + 1], rays.wavelength, wl_select)
+            d_out, cos2_in, cos2_out, tir = bend_xyz((dx, dy, dz), normal, n1, inv_n2, grating)
         status, ok = _fail(status, ok, tir, Status.TIR, shortcuts)
         failed_at = _first_failure(failed_at, ok, s)
         if record:
@@ -226,7 +258,7 @@ def _trace(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, upto: int | None, r
             if frames is not None:
                 o, r = frames.origin[s], frames.rotation[s]
                 rec = (to_global(rec[0], o, r),) + tuple(to_global(v, None, r) for v in rec[1:])
-            hits.append(SurfaceHit(*(torch.stack(v, -1) for v in rec), t, cos2_in, cos2_out))
+            hits.append(SurfaceHit(*(stack(v) for v in rec), t, cos2_in, cos2_out))
         if shortcuts and bool(ok.all()):
             (x, y, z), (dx, dy, dz) = (hx, hy, hz), d_out
         else:
@@ -252,9 +284,32 @@ def _trace(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, upto: int | None, r
         failed_at = _first_failure(failed_at, ok, lens.num_surfaces)
         backtrack = _flag(backtrack, ok, t < 0, shortcuts)
         x, y, z = torch.where(ok, x + t * dx, x), torch.where(ok, y + t * dy, y), torch.where(ok, z + t * dz, z)
-    return RayTrace(pos=torch.stack([x, y, z], -1), dir=torch.stack([dx, dy, dz], -1), status=status.long(),
+    return RayTrace(pos=stack([x, y, z]), dir=stack([dx, dy, dz]), status=status.long(),
                     backtrack=backtrack > 0, hits=tuple(hits),
                     failed_at=None if failed_at is None else failed_at.long())
+
+
+@dataclass(frozen=True)
+class KernelOptions:
+    """The formulation of the compiled trace's kernel (``optics.compiled``). It differs from the
+    reference (eager) trace only in rounding, and only where that saves work per ray:
+
+    - refraction from one per-wavelength table of n/n' (``interact.refract_ratio_xyz``);
+    - outputs written component-major ((*B, 3) views of (3, *B) planes);
+    - ``near_only[s]``: surface s is a closed-form quadric with 1 + κ ≥ 0, decided from the
+      prescription by the caller, so its far root is never needed (``intersect.quadric_near_xyz``).
+
+    Attributes:
+        near_only: (S,) per surface.
+        ratio_refraction: refract with ``refract_ratio_xyz`` (False: ``bend_xyz``, as eager).
+        component_major: write the outputs component-major (False: interleaved, as eager).
+
+    The last two are switches for ``benchmarks/trace_kernel_ablation.py`` (each change measured).
+    """
+
+    near_only: tuple[bool, ...]
+    ratio_refraction: bool = True
+    component_major: bool = True
 
 
 CHUNK_RAYS = 1 << 16
