@@ -30,7 +30,7 @@ from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import PupilSampling
 from lensopt.plot.accuracy import accuracy_figure
 from lensopt.plot.style import save_figure
-from lensopt.qa.accuracy import DEFAULT_KNOBS, _cast, run_accuracy, spot_reference, weighted_spot
+from lensopt.qa.accuracy import DEFAULT_KNOBS, Point, _cast, run_accuracy, spot_reference, weighted_spot
 from lensopt.spec import build, load_spec
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,16 +39,31 @@ LENSES = {"cooke": ROOT / "specs" / "cooke_triplet.toml", "cmount": ROOT / "lens
 THIRD = ROOT / "specs" / "double_gauss.toml"
 
 
-def part_accuracy(repeats: int, keys: list[str], knobs: tuple[str, ...]) -> dict:
+def part_accuracy(repeats: int, keys: list[str], knobs: tuple[str, ...], merge: bool = False) -> dict:
     out = {}
     for key in keys:
         path = LENSES[key]
         model = build(load_spec(path))
         t0 = time.perf_counter()
         res = run_accuracy(model, knobs=knobs, repeats=repeats)
+        wall, load = time.perf_counter() - t0, os.getloadavg()
+        old = BENCH / f"results_accuracy_{key}.json"
+        runs = []
+        if merge and old.exists():  # keep the recorded points of the knobs not measured now (one table per lens)
+            prev = json.loads(old.read_text())
+            kept = [Point(p["knob"], p["setting"], p["errors"], p["time_s"], p.get("note", ""))
+                    for p in prev["points"] if p["knob"] not in knobs]
+            res.points = kept + res.points
+            res.reference = {**prev["reference"], **res.reference}
+            res.compile_s = res.compile_s if "compiled" in knobs else prev.get("compile_s")
+            res.settings = {**res.settings, "knobs": sorted({p.knob for p in res.points})}
+            first = {"knobs": prev["settings"].get("knobs"), "repeats": prev["settings"].get("repeats"),
+                     "wall_s": prev.get("wall_s"), "load": prev.get("load")}
+            runs = prev.get("runs", [first])
         data = res.as_json(0.01, 0.05)
-        data["wall_s"] = time.perf_counter() - t0
-        data["load"] = os.getloadavg()
+        data["wall_s"] = wall
+        data["load"] = load
+        data["runs"] = runs + [{"knobs": list(knobs), "repeats": repeats, "wall_s": wall, "load": load}]
         (BENCH / f"results_accuracy_{key}.json").write_text(json.dumps(data, indent=1))
         save_figure(accuracy_figure(data, title=model.spec.name), BENCH / f"accuracy_{key}.png", dpi=120)
         out[key] = data
@@ -202,6 +217,8 @@ def main() -> None:
     ap.add_argument("--lenses", default="cooke_triplet_opt,cmount_4p", help="shipped lenses for --part commands")
     ap.add_argument("--accuracy-lenses", default="cooke,cmount", help="lenses of --part accuracy")
     ap.add_argument("--knobs", default=",".join(DEFAULT_KNOBS), help="knobs of --part accuracy")
+    ap.add_argument("--merge", action="store_true",
+                    help="--part accuracy: keep the recorded points of the other knobs in results_accuracy_<lens>.json")
     ap.add_argument("--commands", default=None, help="e.g. 'trace rings:32,plot psf,simulate' (default: all)")
     a = ap.parse_args()
     parts = a.part.split(",")
@@ -210,7 +227,7 @@ def main() -> None:
         return
     torch.set_num_threads(int(os.environ.get("OMP_NUM_THREADS", "2")))
     print(f"load before: {os.getloadavg()}")
-    results = (part_accuracy(a.repeats, a.accuracy_lenses.split(","), tuple(a.knobs.split(",")))
+    results = (part_accuracy(a.repeats, a.accuracy_lenses.split(","), tuple(a.knobs.split(",")), a.merge)
                if "accuracy" in parts else {})
     if "third" in parts:
         part_third(results)

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import dataclasses
 import json
 import logging
 import os
@@ -38,11 +39,12 @@ from pathlib import Path
 
 import torch
 import torch.autograd.forward_ad as fwad
+from torch import Tensor
 
 from lensopt.errors import LensoptError
 from lensopt.optics.intersect import NEWTON_ITERATIONS
 from lensopt.optics.lens import Lens
-from lensopt.optics.trace import Rays, RayTrace, trace
+from lensopt.optics.trace import Rays, RayTrace, SurfaceHit, trace
 
 __all__ = ["BACKENDS", "AUTO_MIN_RAYS", "check_backend", "use_backend", "set_backend", "current_backend",
            "choose_backend",
@@ -144,11 +146,52 @@ def trace_with(lens: Lens, rays: Rays, *, backend: str | None = None, upto: int 
     key = _key(lens, upto, record, newton_iterations)
     first = key not in _compiled_keys
     start = time.perf_counter()
-    out = compiled_trace(lens, rays, upto=upto, record=record, newton_iterations=newton_iterations)
+    out = _compiled_in_chunks(compiled_trace, lens, rays, upto=upto, record=record,
+                              newton_iterations=newton_iterations)
     if first:
         _compiled_keys.add(key)
         _report_first(key, time.perf_counter() - start)
     return out
+
+
+COMPILED_CHUNK = 1 << 16
+"""Rays per call of the compiled kernel: every call gets exactly this many (the last chunk padded with
+copies of the last ray, cut off again), so a lens structure is compiled for one shape only and every
+later call and process finds it in Inductor's on-disk caches."""
+
+
+def _compiled_in_chunks(fn: Callable[..., RayTrace], lens: Lens, rays: Rays, **kwargs: object) -> RayTrace:
+    """``fn(lens, rays, **kwargs)`` (the compiled trace) over fixed-size chunks of ``COMPILED_CHUNK`` rays,
+    concatenated and cut back to the batch (same values: every ray is traced on its own)."""
+    pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
+    batch = pos.shape[:-1]
+    n, size = batch.numel(), COMPILED_CHUNK
+    if n == 0:
+        return trace(lens, rays, **kwargs)  # type: ignore[arg-type]
+    k = -(-n // size)
+    pad = k * size - n
+    wavelength = torch.broadcast_to(rays.wavelength, batch).reshape(-1)
+    pos, dir = pos.reshape(-1, 3), dir.reshape(-1, 3)
+    if pad:
+        pos = torch.cat([pos, pos[-1:].expand(pad, 3)])
+        dir = torch.cat([dir, dir[-1:].expand(pad, 3)])
+        wavelength = torch.cat([wavelength, wavelength[-1:].expand(pad)])
+    # One component-major copy of all chunks, (k, 3, size): chunk j is then a (size, 3) view whose x, y, z
+    # planes are contiguous, the layout (and strides) the kernel is compiled for.
+    pos_cm = pos.reshape(k, size, 3).transpose(1, 2).contiguous()
+    dir_cm = dir.reshape(k, size, 3).transpose(1, 2).contiguous()
+    parts = [fn(lens, Rays(pos_cm[j].movedim(0, -1), dir_cm[j].movedim(0, -1), wavelength[j * size:(j + 1) * size]),
+                **kwargs) for j in range(k)]
+
+    def cat(values: list[Tensor]) -> Tensor:
+        flat = values[0] if len(values) == 1 else torch.cat(values)
+        return flat[:n].reshape(batch + flat.shape[1:])
+
+    hits = tuple(SurfaceHit(*(cat([getattr(p.hits[i], f.name) for p in parts]) for f in dataclasses.fields(SurfaceHit)))
+                 for i in range(len(parts[0].hits)))
+    return RayTrace(pos=cat([p.pos for p in parts]), dir=cat([p.dir for p in parts]),
+                    status=cat([p.status for p in parts]), backtrack=cat([p.backtrack for p in parts]), hits=hits,
+                    failed_at=None if parts[0].failed_at is None else cat([p.failed_at for p in parts]))
 
 
 def compile_log_path() -> Path:

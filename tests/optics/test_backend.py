@@ -20,6 +20,7 @@ from lensopt.errors import LensoptError
 from lensopt.optics import backend
 from lensopt.optics.backend import choose_backend, current_backend, on_compile, trace_with, use_backend
 from lensopt.optics.bundle import trace_bundle
+from lensopt.optics.intersect import NEWTON_ITERATIONS
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec import build, load_spec
 
@@ -123,3 +124,43 @@ def test_cli_trace_same_numbers_on_both_backends() -> None:
     for fe, fc in zip(out["eager"]["fields"], out["compiled"]["fields"], strict=True):
         assert fc["rms_spot_radius_um"] == pytest.approx(fe["rms_spot_radius_um"], abs=1e-9)
         assert fc["failed_rays"] == fe["failed_rays"]
+
+
+def test_compiled_calls_get_one_fixed_shape_and_the_padding_is_cut_off(monkeypatch) -> None:
+    """The chunking around the compiled kernel (``backend._compiled_in_chunks``): every kernel call gets
+    exactly ``COMPILED_CHUNK`` rays in the same layout, whatever the batch; the result is the one-pass
+    trace's, bit for bit (the kernel stand-in here is the eager trace itself: elementwise IEEE arithmetic
+    does not depend on how the rays are split or padded), for a batch of several chunks with a short
+    last one, for a batch shorter than one chunk, with recorded hits and broadcast wavelengths."""
+    from lensopt.optics.trace import trace
+
+    model = build(load_spec(CMOUNT))
+    lens, system = model.lens, model.system
+    pupil = PupilSampling.parse("rings:6").points(dtype=lens.dtype)
+    seen: list[tuple] = []
+
+    def kernel(lens, rays, **kw):  # type: ignore[no-untyped-def]
+        seen.append((rays.pos.shape, rays.pos.stride(), rays.dir.stride(), rays.wavelength.shape))
+        return trace(lens, rays, **kw)
+
+    captured = []
+    real = backend.trace_with
+    monkeypatch.setattr("lensopt.optics.bundle.trace_with",
+                        lambda lens, rays, **kw: captured.append(rays) or real(lens, rays, **kw))
+    trace_bundle(lens, system, pupil, half_pupil=True, backend="eager")
+    rays = captured[-1]  # (F, W, P, 3) positions, (1, W, 1) wavelengths: broadcast
+    n = torch.broadcast_shapes(rays.pos.shape[:-1], rays.wavelength.shape).numel()
+    for chunk, record in ((97, True), (1000, False), (4 * n, True)):  # many chunks; short last; one padded
+        monkeypatch.setattr(backend, "COMPILED_CHUNK", chunk)
+        seen.clear()
+        ref = trace(lens, rays, record=record)
+        got = backend._compiled_in_chunks(kernel, lens, rays, record=record, upto=None,
+                                          newton_iterations=NEWTON_ITERATIONS)
+        assert len(seen) == -(-n // chunk)
+        assert {s for s in seen} == {(torch.Size([chunk, 3]), (1, chunk), (1, chunk), torch.Size([chunk]))}
+        for a, b in ((ref.pos, got.pos), (ref.dir, got.dir), (ref.status, got.status),
+                     (ref.backtrack, got.backtrack), (ref.failed_at, got.failed_at)):
+            assert (a is None and b is None) or (a.shape == b.shape and torch.equal(a, b))
+        assert len(ref.hits) == len(got.hits) == (lens.num_surfaces if record else 0)
+        for ha, hb in zip(ref.hits, got.hits, strict=True):
+            assert torch.equal(ha.pos, hb.pos) and torch.equal(ha.cos2_out, hb.cos2_out)
