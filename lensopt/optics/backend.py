@@ -42,6 +42,7 @@ import torch.autograd.forward_ad as fwad
 from torch import Tensor
 
 from lensopt.errors import LensoptError
+from lensopt.optics import aot
 from lensopt.optics.intersect import NEWTON_ITERATIONS
 from lensopt.optics.lens import Lens
 from lensopt.optics.trace import Rays, RayTrace, SurfaceHit, trace
@@ -53,6 +54,8 @@ __all__ = ["BACKENDS", "AUTO_MIN_RAYS", "check_backend", "use_backend", "set_bac
 logger = logging.getLogger(__name__)
 
 BACKENDS = ("auto", "eager", "compiled")
+AOT_MIN_RAYS = 0
+"""Smallest call (rays) that ``auto`` sends to an existing AOT package (measured break-even)."""
 AUTO_MIN_RAYS = 10_000_000
 """Rays (summed over calls) one lens structure is traced eagerly under ``auto`` before it is compiled:
 ≈ 5 s of float64 eager tracing here, about what a compilation costs with a warm on-disk cache."""
@@ -114,14 +117,23 @@ def _key(lens: Lens, upto: int | None, record: bool, newton_iterations: int) -> 
 
 
 def choose_backend(lens: Lens, n_rays: int, *, backend: str | None = None, upto: int | None = None,
-                   record: bool = False, newton_iterations: int = NEWTON_ITERATIONS, count: bool = True) -> str:
-    """``eager`` or ``compiled`` for a call tracing ``n_rays`` rays (``auto`` resolved as described above;
-    ``count`` adds the rays to the structure's running total)."""
+                   record: bool = False, newton_iterations: int = NEWTON_ITERATIONS, count: bool = True,
+                   grad: bool = False) -> str:
+    """``eager``, ``compiled`` (``torch.compile``) or ``aot`` (this structure's AOT package) for a call tracing
+    ``n_rays`` rays (``auto`` resolved as described above; ``grad``: the call needs autograd, which a package
+    does not do; ``count`` adds the rays to the structure's running total)."""
     name = current_backend() if backend is None else check_backend(backend, path="backend")
-    if name != "auto":
+    if name == "eager":
         return name
-    if _in_forward_transform():
+    forward = _in_forward_transform()
+    packaged = (not grad and not forward
+                and aot.has_package(lens, upto=upto, record=record, newton_iterations=newton_iterations))
+    if name == "compiled":
+        return "aot" if packaged else "compiled"
+    if forward:
         return "eager"
+    if packaged and n_rays >= AOT_MIN_RAYS:
+        return "aot"
     key = _key(lens, upto, record, newton_iterations)
     if key in _compiled_keys:
         return "compiled"
@@ -131,6 +143,14 @@ def choose_backend(lens: Lens, n_rays: int, *, backend: str | None = None, upto:
     return "compiled" if seen > AUTO_MIN_RAYS else "eager"
 
 
+def _needs_grad(lens: Lens, rays: Rays) -> bool:
+    if not torch.is_grad_enabled():
+        return False
+    tensors = [rays.pos, rays.dir]
+    tensors += [v for f in dataclasses.fields(lens) if isinstance(v := getattr(lens, f.name), Tensor)]
+    return any(t.requires_grad for t in tensors)
+
+
 def trace_with(lens: Lens, rays: Rays, *, backend: str | None = None, upto: int | None = None,
                record: bool = False, newton_iterations: int = NEWTON_ITERATIONS) -> RayTrace:
     """``trace(lens, rays, ...)`` on the chosen backend (default: ``current_backend()``)."""
@@ -138,15 +158,18 @@ def trace_with(lens: Lens, rays: Rays, *, backend: str | None = None, upto: int 
         check_backend(backend, path="backend")
     n_rays = torch.broadcast_shapes(rays.pos.shape[:-1], rays.dir.shape[:-1], rays.wavelength.shape).numel()
     name = choose_backend(lens, n_rays, backend=backend, upto=upto, record=record,
-                          newton_iterations=newton_iterations)
+                          newton_iterations=newton_iterations, grad=_needs_grad(lens, rays))
     if name == "eager":
         return trace(lens, rays, upto=upto, record=record, newton_iterations=newton_iterations)
+    if name == "aot":
+        return _compiled_in_chunks(aot.aot_trace, lens, rays, size=aot.AOT_CHUNK, upto=upto, record=record,
+                                   newton_iterations=newton_iterations)
     from lensopt.optics.compiled import compiled_trace  # imports torch._dynamo lazily
 
     key = _key(lens, upto, record, newton_iterations)
     first = key not in _compiled_keys
     start = time.perf_counter()
-    out = _compiled_in_chunks(compiled_trace, lens, rays, upto=upto, record=record,
+    out = _compiled_in_chunks(compiled_trace, lens, rays, size=COMPILED_CHUNK, upto=upto, record=record,
                               newton_iterations=newton_iterations)
     if first:
         _compiled_keys.add(key)
@@ -160,12 +183,13 @@ copies of the last ray, cut off again), so a lens structure is compiled for one 
 later call and process finds it in Inductor's on-disk caches."""
 
 
-def _compiled_in_chunks(fn: Callable[..., RayTrace], lens: Lens, rays: Rays, **kwargs: object) -> RayTrace:
-    """``fn(lens, rays, **kwargs)`` (the compiled trace) over fixed-size chunks of ``COMPILED_CHUNK`` rays,
-    concatenated and cut back to the batch (same values: every ray is traced on its own)."""
+def _compiled_in_chunks(fn: Callable[..., RayTrace], lens: Lens, rays: Rays, *, size: int,
+                        **kwargs: object) -> RayTrace:
+    """``fn(lens, rays, **kwargs)`` (a compiled trace) over fixed-size chunks of ``size`` rays, concatenated
+    and cut back to the batch (same values: every ray is traced on its own)."""
     pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
     batch = pos.shape[:-1]
-    n, size = batch.numel(), COMPILED_CHUNK
+    n = batch.numel()
     if n == 0:
         return trace(lens, rays, **kwargs)  # type: ignore[arg-type]
     k = -(-n // size)

@@ -128,7 +128,7 @@ def test_cli_trace_same_numbers_on_both_backends() -> None:
 
 def test_compiled_calls_get_one_fixed_shape_and_the_padding_is_cut_off(monkeypatch) -> None:
     """The chunking around the compiled kernel (``backend._compiled_in_chunks``): every kernel call gets
-    exactly ``COMPILED_CHUNK`` rays in the same layout, whatever the batch; the result is the one-pass
+    exactly ``size`` rays (``COMPILED_CHUNK``, ``aot.AOT_CHUNK``) in the same layout, whatever the batch; the result is the one-pass
     trace's, bit for bit (the kernel stand-in here is the eager trace itself: elementwise IEEE arithmetic
     does not depend on how the rays are split or padded), for a batch of several chunks with a short
     last one, for a batch shorter than one chunk, with recorded hits and broadcast wavelengths."""
@@ -151,10 +151,9 @@ def test_compiled_calls_get_one_fixed_shape_and_the_padding_is_cut_off(monkeypat
     rays = captured[-1]  # (F, W, P, 3) positions, (1, W, 1) wavelengths: broadcast
     n = torch.broadcast_shapes(rays.pos.shape[:-1], rays.wavelength.shape).numel()
     for chunk, record in ((97, True), (1000, False), (4 * n, True)):  # many chunks; short last; one padded
-        monkeypatch.setattr(backend, "COMPILED_CHUNK", chunk)
         seen.clear()
         ref = trace(lens, rays, record=record)
-        got = backend._compiled_in_chunks(kernel, lens, rays, record=record, upto=None,
+        got = backend._compiled_in_chunks(kernel, lens, rays, size=chunk, record=record, upto=None,
                                           newton_iterations=NEWTON_ITERATIONS)
         assert len(seen) == -(-n // chunk)
         assert {s for s in seen} == {(torch.Size([chunk, 3]), (1, chunk), (1, chunk), torch.Size([chunk]))}
