@@ -31,14 +31,14 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-SIZES = (1_000, 4_000, 16_000, 65_536, 131_072, 262_144)
+SIZES = (100, 1_000, 4_000, 16_384, 65_536, 262_144)
 
 
-def child(lens_path: str, repeats: int) -> dict:
+def child(lens_path: str, repeats: int, kind: str) -> dict:
     t0 = time.perf_counter()
     import torch
 
-    from lensopt.optics import backend, bundle
+    from lensopt.optics import aot, backend, bundle
     from lensopt.optics.sampling import PupilSampling
     from lensopt.optics.trace import Rays, trace
     from lensopt.spec import build, load_spec
@@ -63,7 +63,8 @@ def child(lens_path: str, repeats: int) -> dict:
     pos, dir = pos.reshape(-1, 3), dir.reshape(-1, 3)
     wl = torch.broadcast_to(rays.wavelength, rays.pos.shape[:-1]).reshape(-1)
     total = pos.shape[0]
-    out: dict = {"import_s": t_import, "batch_rays": total, "chunk": backend.COMPILED_CHUNK}
+    chunk = aot.AOT_CHUNK if kind == "aot" else backend.COMPILED_CHUNK
+    out: dict = {"import_s": t_import, "batch_rays": total, "chunk": chunk, "kind": kind}
 
     def sub(n: int) -> Rays:
         idx = torch.arange(n) % total
@@ -71,10 +72,14 @@ def child(lens_path: str, repeats: int) -> dict:
 
     lens = model.lens
     with torch.no_grad():
-        r = sub(backend.COMPILED_CHUNK)
+        r = sub(chunk)
         t = time.perf_counter()
+        if kind == "aot" and not aot.has_package(lens):
+            out["build_s"] = aot.build_package(lens)
         backend.trace_with(lens, r, backend="compiled")
         out["first_call_s"] = time.perf_counter() - t
+        if kind == "aot":
+            assert aot.has_package(lens) and backend.choose_backend(lens, chunk, backend="compiled") == "aot"
         t = time.perf_counter()
         backend.trace_with(lens, r, backend="compiled")
         out["second_call_s"] = time.perf_counter() - t
@@ -98,7 +103,7 @@ def child(lens_path: str, repeats: int) -> dict:
     return out
 
 
-def parent(lenses: list[str], warm: int, repeats: int, json_out: Path | None) -> None:
+def parent(lenses: list[str], warm: int, repeats: int, kind: str, json_out: Path | None) -> None:
     results = {}
     for name in lenses:
         path = ROOT / name if "/" in name else ROOT / "lenses" / f"{name}.json"
@@ -107,7 +112,8 @@ def parent(lenses: list[str], warm: int, repeats: int, json_out: Path | None) ->
             env = {**os.environ, "TORCHINDUCTOR_CACHE_DIR": cache, "PYTHONPATH": str(ROOT)}
             for i in range(1 + warm):
                 t = time.perf_counter()
-                r = subprocess.run([sys.executable, __file__, "--child", str(path), "--repeats", str(repeats)],
+                r = subprocess.run([sys.executable, __file__, "--child", str(path), "--repeats", str(repeats),
+                                    "--kind", kind],
                                    env=env, capture_output=True, text=True)
                 if r.returncode != 0:
                     raise SystemExit(r.stderr[-2000:])
@@ -115,7 +121,7 @@ def parent(lenses: list[str], warm: int, repeats: int, json_out: Path | None) ->
                 d["process_s"] = time.perf_counter() - t
                 d["cache"] = "cold" if i == 0 else "warm"
                 runs.append(d)
-                print(f"{path.name} {d['cache']}: first compiled call {d['first_call_s']:.2f} s, second "
+                print(f"{path.name} {kind} {d['cache']}: first compiled call {d['first_call_s']:.2f} s, second "
                       f"{d['second_call_s'] * 1e3:.1f} ms, process {d['process_s']:.1f} s, max diff "
                       f"{d['max_diff_mm']:.1e} mm, same status {d['same_status']}, load {d['load'][0]:.1f}", flush=True)
         results[path.name] = runs
@@ -137,11 +143,13 @@ def main() -> None:
     ap.add_argument("--warm", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", default=None)
+    ap.add_argument("--kind", default="aot", choices=("aot", "compiled"),
+                    help="aot: the AOT package (optics.aot); compiled: torch.compile in the process")
     a = ap.parse_args()
     if a.child:
-        print(json.dumps(child(a.child, a.repeats)))
+        print(json.dumps(child(a.child, a.repeats, a.kind)))
     else:
-        parent(a.lenses.split(","), a.warm, a.repeats, Path(a.json) if a.json else None)
+        parent(a.lenses.split(","), a.warm, a.repeats, a.kind, Path(a.json) if a.json else None)
 
 
 if __name__ == "__main__":

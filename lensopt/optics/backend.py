@@ -1,27 +1,32 @@
-"""Which trace runs: the eager ``trace`` or the ``torch.compile``-d ``compiled_trace``.
+"""Which trace runs: the eager ``trace``, an AOT-compiled package (``optics.aot``) or ``torch.compile``.
 
-Both give the same ``RayTrace`` (to ~1e-14 mm; tests hold them to 1e-12 mm). They differ in cost:
+All give the same ``RayTrace`` (to ~1e-14 mm; tests hold them to 1e-12 mm). They differ in cost
+(benchmarks/RESULTS.md, issue 13 session 21, measured on the loaded 2-core machine):
 
-- eager: no start-up, ≈ 0.1–0.2 µs per ray and surface in float64 on these 2-core machines (large
-  batches run in cache-sized chunks, ``trace.CHUNK_RAYS``);
-- compiled: ≈ 9× faster per ray in float64, but the first call per lens *structure* (and per recorded/upto
-  variant) in a process pays the compilation: 20–90 s on a quiet 2-core machine, minutes when it is
-  loaded, ≈ 5 s in a later process that finds Inductor's kernels in its on-disk cache
-  (``TORCHINDUCTOR_CACHE_DIR``, default ``/tmp/torchinductor_$USER``) — but that cache is keyed by
-  the ray batch's shape: a new ray count in a new process compiles again (benchmarks/RESULTS.md,
-  issue 13).
+- eager: no start-up; every op writes a full array, and each call costs a fixed ≈ 10 ms of Python
+  dispatch (large batches run in cache-sized chunks, ``trace.CHUNK_RAYS``);
+- ``torch.compile`` (``optics.compiled``): ≈ 8× faster per ray, but *every process* pays Dynamo's
+  tracing and Inductor's cache look-ups per lens structure — ≈ 20 s with a warm on-disk cache, 2 min
+  cold — so it pays only for jobs tracing ~1e7 rays or more in one process;
+- an AOT package: the same fused kernel, compiled once per machine and structure (``lensopt warmup``,
+  or ``aot.build_package``), loaded in milliseconds by later processes. It is fed fixed chunks of
+  ``aot.AOT_CHUNK`` rays (the last one padded with copies of the last ray and cut off), the one shape
+  it was compiled for; inference only, CPU only.
 
-``auto`` (the default) therefore works like renting skis: it traces eagerly until the rays traced
-for one lens structure in this process (``AUTO_MIN_RAYS``, ≈ 5 s of eager work) would have paid for
-a compilation, then compiles. A call inside a forward-mode transform (``torch.func.jacfwd``,
-``vmap``, dual tensors: the LM Jacobian) always runs eagerly — the compiled trace does not take
-functorch-wrapped tensors. The choice is made from ray counts only (not timings), so the same
-command always takes the same path; the numbers agree either way.
+``auto`` (the default) traces on the package when this structure has one on disk and the call needs no
+gradients (the commands: trace, plot psf, simulate, evaluate, once ``lensopt warmup LENS`` ran);
+otherwise eagerly, until the rays traced for one structure in this process (``AUTO_MIN_RAYS``, ≈ 5 s of
+eager work) would have paid for an in-process ``torch.compile``, which it then uses. A call inside a
+forward-mode transform (``torch.func.jacfwd``, ``vmap``, dual tensors: the LM Jacobian) always runs
+eagerly. ``compiled`` forces the compiled kernel: the package when there is one (and no gradients are
+needed), else ``torch.compile``. The choice is made from ray counts and the files on disk (not
+timings), so the same command on the same machine always takes the same path.
 
 The backend is chosen per call (``backend=``) or for a block of code with ``use_backend`` (the CLI's
-``--backend`` option), so the analysis functions need no extra argument. The first compilation of a
+``--backend`` option), so the analysis functions need no extra argument. The first ``torch.compile`` of a
 structure on this machine is timed and reported once through ``on_compile`` listeners (the CLI prints
-it) and remembered in ``lensopt_compiles.json`` in the Inductor cache directory.
+it) and remembered in ``lensopt_compiles.json`` in the Inductor cache directory; ``torch.compile`` is
+also fed fixed chunks (``COMPILED_CHUNK``) so that it compiles one shape per structure.
 """
 
 from __future__ import annotations
@@ -47,7 +52,8 @@ from lensopt.optics.intersect import NEWTON_ITERATIONS
 from lensopt.optics.lens import Lens
 from lensopt.optics.trace import Rays, RayTrace, SurfaceHit, trace
 
-__all__ = ["BACKENDS", "AUTO_MIN_RAYS", "check_backend", "use_backend", "set_backend", "current_backend",
+__all__ = ["BACKENDS", "AUTO_MIN_RAYS", "AOT_MIN_RAYS", "COMPILED_CHUNK",
+           "check_backend", "use_backend", "set_backend", "current_backend",
            "choose_backend",
            "trace_with", "on_compile", "compile_log_path", "reset_auto_counts"]
 
