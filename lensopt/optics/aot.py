@@ -29,6 +29,7 @@ import os
 import re
 import tempfile
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -166,7 +167,8 @@ def build_package(lens: Lens, *, upto: int | None = None, record: bool = False,
     path = package_path(lens, upto=upto, record=record, newton_iterations=newton_iterations)
     path.parent.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    with torch.no_grad():
+    with torch.no_grad(), warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)  # torch-internal deprecations printed by export
         program = torch.export.export(_Flat(lens, upto, record, newton_iterations), _example(lens), strict=False)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".pt2")
         os.close(fd)
