@@ -347,7 +347,7 @@ def _sim_points(model: Model, knobs: Sequence[str], repeats: int,
     t0 = time.perf_counter()
     try:
         ref = simulate(grid=(12, 9), fields=36, sampling="rings:48")
-    except LensoptError as err:  # e.g. no [sensor], or no rgb_weights for more than 3 wavelengths
+    except LensoptError as err:  # e.g. no [sensor] (RGB weights are derived from the spectrum, S4.1.2)
         return [], {"skipped": f"the lens cannot simulate the RGB test scene: {err}"}
     ref_info = {"grid": "12x9", "fields": 36, "sampling": "rings:48", "time_s": time.perf_counter() - t0,
                 "image": f"coffee.png {w}x{h} on the sensor corner"}
