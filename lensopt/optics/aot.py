@@ -40,8 +40,8 @@ from lensopt.optics.intersect import NEWTON_ITERATIONS
 from lensopt.optics.lens import Lens
 from lensopt.optics.trace import Rays, RayTrace, SurfaceHit, trace
 
-__all__ = ["AOT_CHUNK", "package_dir", "package_path", "has_package", "build_package", "aot_trace", "supported",
-           "describe"]
+__all__ = ["AOT_CHUNK", "package_dir", "package_path", "has_package", "is_loaded", "build_package", "aot_trace",
+           "supported", "describe"]
 
 AOT_CHUNK = 1 << 14
 """Rays per call of a package (its one input shape)."""
@@ -111,6 +111,12 @@ def has_package(lens: Lens, *, upto: int | None = None, record: bool = False,
     """Whether a package for this structure is on disk (a ``stat``, nothing loaded)."""
     return supported(lens) and package_path(lens, upto=upto, record=record,
                                             newton_iterations=newton_iterations).exists()
+
+
+def is_loaded(lens: Lens, *, upto: int | None = None, record: bool = False,
+              newton_iterations: int = NEWTON_ITERATIONS) -> bool:
+    """Whether this structure's package is loaded in this process already (its next call costs no loading)."""
+    return package_path(lens, upto=upto, record=record, newton_iterations=newton_iterations) in _loaded
 
 
 class _Flat(torch.nn.Module):

@@ -3,7 +3,7 @@
 All give the same ``RayTrace`` (to ~1e-14 mm; tests hold them to 1e-12 mm). They differ in cost
 (benchmarks/RESULTS.md, issue 13 session 21, measured on the loaded 2-core machine):
 
-- eager: no start-up; every op writes a full array, and each call costs a fixed ≈ 10 ms of Python
+- eager: no start-up; every op writes a full array, and each call costs a fixed ≈ 5–20 ms of Python
   dispatch (large batches run in cache-sized chunks, ``trace.CHUNK_RAYS``);
 - ``torch.compile`` (``optics.compiled``): ≈ 8× faster per ray, but *every process* pays Dynamo's
   tracing and Inductor's cache look-ups per lens structure — ≈ 20 s with a warm on-disk cache, 2 min
@@ -13,10 +13,11 @@ All give the same ``RayTrace`` (to ~1e-14 mm; tests hold them to 1e-12 mm). They
   ``aot.AOT_CHUNK`` rays (the last one padded with copies of the last ray and cut off), the one shape
   it was compiled for; inference only, CPU only.
 
-``auto`` (the default) traces on the package when this structure has one on disk and the call needs no
-gradients (the commands: trace, plot psf, simulate, evaluate, once ``lensopt warmup LENS`` ran);
-otherwise eagerly, until the rays traced for one structure in this process (``AUTO_MIN_RAYS``, ≈ 5 s of
-eager work) would have paid for an in-process ``torch.compile``, which it then uses. A call inside a
+``auto`` (the default) traces on the package when this structure has one on disk, the call needs no
+gradients and it traces ``AOT_MIN_RAYS`` rays or more (or the package is loaded already): the commands
+trace, plot psf, simulate and evaluate, once ``lensopt warmup LENS`` ran. Otherwise it traces eagerly,
+until the rays traced for one structure in this process (``AUTO_MIN_RAYS``, ≈ 5 s of eager work) would
+have paid for an in-process ``torch.compile``, which it then uses. A call inside a
 forward-mode transform (``torch.func.jacfwd``, ``vmap``, dual tensors: the LM Jacobian) always runs
 eagerly. ``compiled`` forces the compiled kernel: the package when there is one (and no gradients are
 needed), else ``torch.compile``. The choice is made from ray counts and the files on disk (not
@@ -60,8 +61,11 @@ __all__ = ["BACKENDS", "AUTO_MIN_RAYS", "AOT_MIN_RAYS", "COMPILED_CHUNK",
 logger = logging.getLogger(__name__)
 
 BACKENDS = ("auto", "eager", "compiled")
-AOT_MIN_RAYS = 0
-"""Smallest call (rays) that ``auto`` sends to an existing AOT package (measured break-even)."""
+AOT_MIN_RAYS = 10_000
+"""Smallest call (rays) that ``auto`` sends to an AOT package not loaded yet in this process: loading one
+costs 6–10 ms (measured, loaded machine), what the eager trace takes for roughly 5–10 thousand rays on
+the shipped lenses; once loaded, a package takes calls of any size (one padded chunk costs about a
+millisecond, less than an eager call's fixed cost)."""
 AUTO_MIN_RAYS = 10_000_000
 """Rays (summed over calls) one lens structure is traced eagerly under ``auto`` before it is compiled:
 ≈ 5 s of float64 eager tracing here, about what a compilation costs with a warm on-disk cache."""
@@ -138,7 +142,8 @@ def choose_backend(lens: Lens, n_rays: int, *, backend: str | None = None, upto:
         return "aot" if packaged else "compiled"
     if forward:
         return "eager"
-    if packaged and n_rays >= AOT_MIN_RAYS:
+    if packaged and (n_rays >= AOT_MIN_RAYS
+                     or aot.is_loaded(lens, upto=upto, record=record, newton_iterations=newton_iterations)):
         return "aot"
     key = _key(lens, upto, record, newton_iterations)
     if key in _compiled_keys:

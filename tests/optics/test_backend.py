@@ -231,3 +231,20 @@ def test_aot_bundle_equals_eager_to_1e12_mm_on_the_cmount_lens() -> None:
     assert (eager.result.dir - fast.result.dir)[ok].abs().max() < 1e-12
     for he, hc in zip(eager.result.hits, fast.result.hits, strict=True):
         assert (he.pos - hc.pos)[ok].abs().max() < 1e-12
+
+
+def test_auto_sends_small_calls_to_a_package_only_once_it_is_loaded(tmp_path, monkeypatch) -> None:
+    """``AOT_MIN_RAYS``: loading a package costs milliseconds, so a small call does not load one; once
+    loaded (by a larger call) the package takes calls of any size. (Stand-in package files and loader:
+    only the choice is tested here.)"""
+    monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
+    lens = build(load_spec(COOKE)).lens
+    path = aot.package_path(lens)
+    path.parent.mkdir(parents=True)
+    path.write_bytes(b"stand-in")
+    monkeypatch.setattr(aot, "_loaded", {})
+    assert choose_backend(lens, backend.AOT_MIN_RAYS - 1) == "eager"
+    assert choose_backend(lens, backend.AOT_MIN_RAYS) == "aot"
+    aot._loaded[path] = object()  # what the first aot_trace call does
+    assert choose_backend(lens, 9) == "aot"
+    assert choose_backend(lens, 9, record=True) == "eager"  # another structure, no package
