@@ -1,21 +1,23 @@
 """Issue 13: what the compiled trace costs and buys per process when it is always fed one shape.
 
-``trace_with(..., backend="compiled")`` feeds the kernel fixed chunks of ``backend.COMPILED_CHUNK`` rays
-(the last one padded), so a lens structure compiles once per machine and later processes should find it
-in Inductor's on-disk caches. Each measurement is a fresh process (``--child``) that:
+The compiled kernels get fixed chunks (``backend.COMPILED_CHUNK`` rays for ``torch.compile``,
+``aot.AOT_CHUNK`` for an AOT package; the last chunk padded), so a lens structure compiles once per
+machine. ``--kind compiled``: ``torch.compile`` in the process (later processes find Inductor's on-disk
+caches); ``--kind aot`` (default): the structure's AOT package (``optics.aot``), built by the cold process.
+Each measurement is a fresh process (``--child``) that:
 
 1. imports lensopt and builds the lens and a ray batch (the ``rings:64`` bundle of every field and
    wavelength, the batch ``lensopt trace --sampling rings:64`` traces);
-2. times its first compiled call on one chunk: the compilation with a cold cache, Dynamo's tracing plus
-   the cache look-ups with a warm one;
+2. times its first compiled call on one chunk: the compilation with a cold cache; with a warm one,
+   whatever a new process pays (Dynamo's tracing and the cache look-ups, or loading the package);
 3. times steady calls (median of ``--repeats``) of the compiled and the eager trace on n rays, n from
-   1,000 to the whole batch, interleaved.
+   100 to the whole batch, interleaved.
 
 The parent runs, per lens, with a private, empty ``TORCHINDUCTOR_CACHE_DIR``: one cold process, then
-``--warm`` warm ones, and prints the per-process start-up cost and the break-even ray counts:
+``--warm`` warm ones (benchmarks/RESULTS.md, issue 13 session 21):
 
-    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/compile_fixed_shape.py [--lenses cooke_triplet_opt,cmount_4p]
-        [--warm 2] [--repeats 5] [--json benchmarks/results_compile_fixed_shape.json]
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/compile_fixed_shape.py --kind aot \
+        --lenses cooke_triplet_opt,cmount_4p --warm 2 --repeats 5 --json benchmarks/results_compile_fixed_shape_aot.json
 """
 
 from __future__ import annotations

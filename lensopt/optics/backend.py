@@ -61,11 +61,11 @@ __all__ = ["BACKENDS", "AUTO_MIN_RAYS", "AOT_MIN_RAYS", "COMPILED_CHUNK",
 logger = logging.getLogger(__name__)
 
 BACKENDS = ("auto", "eager", "compiled")
-AOT_MIN_RAYS = 10_000
+AOT_MIN_RAYS = 5_000
 """Smallest call (rays) that ``auto`` sends to an AOT package not loaded yet in this process: loading one
-costs 6–10 ms (measured, loaded machine), what the eager trace takes for roughly 5–10 thousand rays on
-the shipped lenses; once loaded, a package takes calls of any size (one padded chunk costs about a
-millisecond, less than an eager call's fixed cost)."""
+costs 6–10 ms (measured, loaded machine), about what the eager trace takes for 5,000 rays on the Cooke
+triplet (9,216 rays ≈ 12 ms; the C-mount costs more per ray); once loaded, a package takes calls of any
+size (one padded chunk costs about a millisecond, less than an eager call's fixed cost)."""
 AUTO_MIN_RAYS = 10_000_000
 """Rays (summed over calls) one lens structure is traced eagerly under ``auto`` before it is compiled:
 ≈ 5 s of float64 eager tracing here, about what a compilation costs with a warm on-disk cache."""
