@@ -40,8 +40,8 @@ from lensopt.optics.intersect import NEWTON_ITERATIONS
 from lensopt.optics.lens import Lens
 from lensopt.optics.trace import Rays, RayTrace, SurfaceHit, trace
 
-__all__ = ["AOT_CHUNK", "package_dir", "package_path", "has_package", "is_loaded", "build_package", "aot_trace",
-           "supported", "describe"]
+__all__ = ["AOT_CHUNK", "package_dir", "package_path", "has_package", "is_loaded", "mark_broken", "build_package",
+           "aot_trace", "supported", "describe"]
 
 AOT_CHUNK = 1 << 14
 """Rays per call of a package (its one input shape)."""
@@ -51,6 +51,7 @@ _SOURCES = ("trace.py", "intersect.py", "interact.py", "surfaces.py", "lens.py",
 """The source files the kernel is compiled from (their hash is part of a package's key)."""
 _MAX_FUSION_SIZE = 4096  # as ``compiled._MAX_FUSION_SIZE``: one fused loop over the surfaces
 _loaded: dict[Path, Any] = {}
+_broken: set[Path] = set()
 _source_hash: str | None = None
 
 
@@ -109,8 +110,18 @@ def package_path(lens: Lens, *, upto: int | None = None, record: bool = False,
 def has_package(lens: Lens, *, upto: int | None = None, record: bool = False,
                 newton_iterations: int = NEWTON_ITERATIONS) -> bool:
     """Whether a package for this structure is on disk (a ``stat``, nothing loaded)."""
-    return supported(lens) and package_path(lens, upto=upto, record=record,
-                                            newton_iterations=newton_iterations).exists()
+    if not supported(lens):
+        return False
+    path = package_path(lens, upto=upto, record=record, newton_iterations=newton_iterations)
+    return path not in _broken and path.exists()
+
+
+def mark_broken(lens: Lens, *, upto: int | None = None, record: bool = False,
+                newton_iterations: int = NEWTON_ITERATIONS) -> None:
+    """Stop using this structure's package in this process (it failed to load or run)."""
+    path = package_path(lens, upto=upto, record=record, newton_iterations=newton_iterations)
+    _broken.add(path)
+    _loaded.pop(path, None)
 
 
 def is_loaded(lens: Lens, *, upto: int | None = None, record: bool = False,
@@ -186,6 +197,7 @@ def build_package(lens: Lens, *, upto: int | None = None, record: bool = False,
             if os.path.exists(tmp):
                 os.unlink(tmp)
     _loaded.pop(path, None)
+    _broken.discard(path)
     return time.perf_counter() - start
 
 

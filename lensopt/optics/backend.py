@@ -173,8 +173,15 @@ def trace_with(lens: Lens, rays: Rays, *, backend: str | None = None, upto: int 
     if name == "eager":
         return trace(lens, rays, upto=upto, record=record, newton_iterations=newton_iterations)
     if name == "aot":
-        return _compiled_in_chunks(aot.aot_trace, lens, rays, size=aot.AOT_CHUNK, upto=upto, record=record,
-                                   newton_iterations=newton_iterations)
+        try:
+            return _compiled_in_chunks(aot.aot_trace, lens, rays, size=aot.AOT_CHUNK, upto=upto, record=record,
+                                       newton_iterations=newton_iterations)
+        except Exception as err:  # a package that does not load or run (damaged, foreign): eager from now on
+            aot.mark_broken(lens, upto=upto, record=record, newton_iterations=newton_iterations)
+            logger.warning("the compiled trace package %s failed (%s: %s); tracing eagerly",
+                           aot.package_path(lens, upto=upto, record=record, newton_iterations=newton_iterations),
+                           type(err).__name__, str(err).splitlines()[0] if str(err) else "")
+            return trace(lens, rays, upto=upto, record=record, newton_iterations=newton_iterations)
     from lensopt.optics.compiled import compiled_trace  # imports torch._dynamo lazily
 
     key = _key(lens, upto, record, newton_iterations)

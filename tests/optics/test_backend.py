@@ -248,3 +248,25 @@ def test_auto_sends_small_calls_to_a_package_only_once_it_is_loaded(tmp_path, mo
     aot._loaded[path] = object()  # what the first aot_trace call does
     assert choose_backend(lens, 9) == "aot"
     assert choose_backend(lens, 9, record=True) == "eager"  # another structure, no package
+
+
+def test_a_damaged_package_falls_back_to_eager_once(tmp_path, monkeypatch, caplog) -> None:
+    """A package file that does not load (truncated, foreign): the call is traced eagerly (same numbers),
+    a warning names the file, and the structure is not offered to the package again in this process."""
+    monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(aot, "_loaded", {})
+    monkeypatch.setattr(aot, "_broken", set())
+    model = build(load_spec(COOKE))
+    lens = model.lens
+    path = aot.package_path(lens)
+    path.parent.mkdir(parents=True)
+    path.write_bytes(b"not a package")
+    pupil = PupilSampling.parse("rings:32").points(dtype=lens.dtype)
+    with torch.no_grad():
+        eager = trace_bundle(lens, model.system, pupil, half_pupil=True, backend="eager")
+        assert choose_backend(lens, 10**5) == "aot"
+        with caplog.at_level("WARNING", logger="lensopt.optics.backend"):
+            got = trace_bundle(lens, model.system, pupil, half_pupil=True)
+    assert torch.equal(got.result.pos, eager.result.pos) and torch.equal(got.result.status, eager.result.status)
+    assert str(path) in caplog.text
+    assert choose_backend(lens, 10**5) == "eager"
