@@ -192,6 +192,7 @@ def build_package(lens: Lens, *, upto: int | None = None, record: bool = False,
         try:
             torch._inductor.aoti_compile_and_package(program, package_path=tmp,
                                                      inductor_configs={"max_fusion_size": _MAX_FUSION_SIZE})
+            os.chmod(tmp, 0o644)  # mkstemp makes it private; a package is an ordinary cache file
             os.replace(tmp, path)
         finally:
             if os.path.exists(tmp):
