@@ -6,10 +6,14 @@ recommendation checked on a third lens, and the wall time of the ray-heavy comma
 Part ``accuracy`` writes benchmarks/results_accuracy_<lens>.json and benchmarks/accuracy_<lens>.png (the
 plot ``lensopt accuracy -o`` draws) and prints markdown tables. Part ``third`` takes each lens's
 recommended setting for a 1 % ESR target and measures its ESR error on specs/double_gauss.toml against
-that lens's own converged reference. Part ``commands`` runs ``lensopt trace --sampling rings:32``,
-``lensopt plot psf`` and ``lensopt simulate`` on the shipped lenses as separate processes (what a user
-waits for, imports and compilation included) with ``--backend eager`` (before: every command traced
-eagerly), the default ``auto``, and ``compiled`` (twice: the second run finds Inductor's on-disk cache).
+that lens's own converged reference. Part ``commands`` runs ``lensopt trace --sampling rings:32`` and
+``rings:64``, ``lensopt plot psf``, ``lensopt simulate`` and ``lensopt evaluate --count 20`` on the shipped
+lenses as separate processes (what a user waits for, imports and compilation included), interleaved, per
+``--backends`` (default eager, auto, compiled; ``auto@cold``: auto with an empty compile cache), e.g. the
+issue-13 session-21 run, after ``lensopt warmup`` into the cache dir:
+
+    .venv/bin/python benchmarks/accuracy_study.py --part commands --repeats 3 --backends eager,auto@cold,auto \
+        --cache-dir /tmp/lensopt_cache --commands-json results_backend_commands_aot.json
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import PupilSampling
 from lensopt.plot.accuracy import accuracy_figure
 from lensopt.plot.style import save_figure
-from lensopt.qa.accuracy import DEFAULT_KNOBS, _cast, run_accuracy, spot_reference, weighted_spot
+from lensopt.qa.accuracy import DEFAULT_KNOBS, Point, _cast, run_accuracy, spot_reference, weighted_spot
 from lensopt.spec import build, load_spec
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,16 +43,31 @@ LENSES = {"cooke": ROOT / "specs" / "cooke_triplet.toml", "cmount": ROOT / "lens
 THIRD = ROOT / "specs" / "double_gauss.toml"
 
 
-def part_accuracy(repeats: int, keys: list[str], knobs: tuple[str, ...]) -> dict:
+def part_accuracy(repeats: int, keys: list[str], knobs: tuple[str, ...], merge: bool = False) -> dict:
     out = {}
     for key in keys:
         path = LENSES[key]
         model = build(load_spec(path))
         t0 = time.perf_counter()
         res = run_accuracy(model, knobs=knobs, repeats=repeats)
+        wall, load = time.perf_counter() - t0, os.getloadavg()
+        old = BENCH / f"results_accuracy_{key}.json"
+        runs = []
+        if merge and old.exists():  # keep the recorded points of the knobs not measured now (one table per lens)
+            prev = json.loads(old.read_text())
+            kept = [Point(p["knob"], p["setting"], p["errors"], p["time_s"], p.get("note", ""))
+                    for p in prev["points"] if p["knob"] not in knobs]
+            res.points = kept + res.points
+            res.reference = {**prev["reference"], **res.reference}
+            res.compile_s = res.compile_s if "compiled" in knobs else prev.get("compile_s")
+            res.settings = {**res.settings, "knobs": sorted({p.knob for p in res.points})}
+            first = {"knobs": prev["settings"].get("knobs"), "repeats": prev["settings"].get("repeats"),
+                     "wall_s": prev.get("wall_s"), "load": prev.get("load")}
+            runs = prev.get("runs", [first])
         data = res.as_json(0.01, 0.05)
-        data["wall_s"] = time.perf_counter() - t0
-        data["load"] = os.getloadavg()
+        data["wall_s"] = wall
+        data["load"] = load
+        data["runs"] = runs + [{"knobs": list(knobs), "repeats": repeats, "wall_s": wall, "load": load}]
         (BENCH / f"results_accuracy_{key}.json").write_text(json.dumps(data, indent=1))
         save_figure(accuracy_figure(data, title=model.spec.name), BENCH / f"accuracy_{key}.png", dpi=120)
         out[key] = data
@@ -102,40 +121,50 @@ def part_third(results: dict) -> None:
         print(f"- {s} on the third lens: ESR error {esr_error(third, s)[0]:.2e}")
 
 
-def part_commands(repeats: int, lenses: list[str], only: list[str] | None) -> None:
+def part_commands(repeats: int, lenses: list[str], only: list[str] | None, backends: list[str],
+                  cache: str | None, json_name: str) -> None:
+    """Each command as its own process per backend, interleaved. A backend ``auto@cold`` is ``auto`` with
+    an empty ``TORCHINDUCTOR_CACHE_DIR`` (no AOT package, no Inductor cache); the others use ``cache``
+    (default: the environment's)."""
+    import tempfile
+
     py = [sys.executable, "-c", "from lensopt.cli import app; app()"]
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "2")}
+    if cache:
+        env["TORCHINDUCTOR_CACHE_DIR"] = cache
+    cold = tempfile.mkdtemp(prefix="lensopt_cold_cache_")
     tmp = ROOT / "out" / "accuracy_study"
     tmp.mkdir(parents=True, exist_ok=True)
     img = ROOT / "lensopt" / "imaging" / "data" / "coffee.png"
     rows = []
-    # A shipped lens by name, or any spec path (simulate needs a [sensor] and, beyond 3 wavelengths, rgb_weights:
-    # neither shipped lens has both, so simulate runs on specs/cooke_triplet.toml).
     for lens in (ROOT / name if "/" in name else ROOT / "lenses" / f"{name}.json" for name in lenses):
         cmds = {"trace rings:32": ["trace", str(lens), "--sampling", "rings:32", "--json"],
                 "trace rings:64": ["trace", str(lens), "--sampling", "rings:64", "--json"],
                 "plot psf": ["plot", "psf", str(lens), "-o", str(tmp / "psf.png")],
-                "simulate": ["simulate", str(lens), str(img), "--region", "corner", "-o", str(tmp / "sim.png")]}
+                "simulate": ["simulate", str(lens), str(img), "--region", "corner", "-o", str(tmp / "sim.png")],
+                "evaluate": ["evaluate", str(lens), "--count", "20", "--json"]}
         for name, args in cmds.items():
             if only is not None and name not in only:
                 continue
             times: dict[str, list[float]] = {}
             for _ in range(repeats):  # interleaved: every backend sees the same load
-                for backend in ("eager", "auto", "compiled"):
+                for backend in backends:
+                    run_env = {**env, "TORCHINDUCTOR_CACHE_DIR": cold} if backend.endswith("@cold") else env
                     t0 = time.perf_counter()
-                    r = subprocess.run([*py, *args, "--backend", backend], env=env, capture_output=True, text=True)
+                    r = subprocess.run([*py, *args, "--backend", backend.split("@")[0]], env=run_env,
+                                       capture_output=True, text=True)
                     dt = time.perf_counter() - t0
                     if r.returncode != 0:
                         raise SystemExit(f"{name} {lens.name} {backend}: {r.stderr[-500:]}")
                     times.setdefault(backend, []).append(dt)
             rows.append((lens.name, name, times))
             med = {b: float(np.median(v)) for b, v in times.items()}
-            auto = f"{med['auto']:.2f} ({med['auto'] / med['eager']:.2f}×)"
-            print(f"| {lens.name} | {name} | {med['eager']:.2f} | {auto} "
-                  f"| {med['compiled']:.2f} ({med['compiled'] / med['eager']:.2f}×) | "
-                  f"{', '.join(f'{t:.1f}' for t in times['compiled'])} |", flush=True)
-    (BENCH / "results_backend_commands.json").write_text(json.dumps(
-        {"rows": [{"lens": a, "command": b, "times_s": c} for a, b, c in rows], "load": os.getloadavg()}, indent=1))
+            cells = " | ".join(f"{med[b]:.2f}" + ("" if b == backends[0] else f" ({med[b] / med[backends[0]]:.2f}×)")
+                               for b in backends)
+            print(f"| {lens.name} | {name} | {cells} | {os.getloadavg()[0]:.1f} |", flush=True)
+    (BENCH / json_name).write_text(json.dumps(
+        {"rows": [{"lens": a, "command": b, "times_s": c} for a, b, c in rows], "backends": backends,
+         "repeats": repeats, "load": os.getloadavg()}, indent=1))
 
 
 def part_illumination(grid: int) -> None:
@@ -202,7 +231,15 @@ def main() -> None:
     ap.add_argument("--lenses", default="cooke_triplet_opt,cmount_4p", help="shipped lenses for --part commands")
     ap.add_argument("--accuracy-lenses", default="cooke,cmount", help="lenses of --part accuracy")
     ap.add_argument("--knobs", default=",".join(DEFAULT_KNOBS), help="knobs of --part accuracy")
-    ap.add_argument("--commands", default=None, help="e.g. 'trace rings:32,plot psf,simulate' (default: all)")
+    ap.add_argument("--backends", default="eager,auto,compiled",
+                    help="--part commands: backends to time (auto@cold: auto with an empty Inductor cache)")
+    ap.add_argument("--cache-dir", default=None, help="--part commands: TORCHINDUCTOR_CACHE_DIR of the runs")
+    ap.add_argument("--commands-json", default="results_backend_commands.json",
+                    help="--part commands: file name under benchmarks/")
+    ap.add_argument("--merge", action="store_true",
+                    help="--part accuracy: keep the recorded points of the other knobs in results_accuracy_<lens>.json")
+    ap.add_argument("--commands", default=None,
+                    help="e.g. 'trace rings:32,trace rings:64,plot psf,simulate,evaluate' (default: all)")
     a = ap.parse_args()
     parts = a.part.split(",")
     if "summary" in parts:
@@ -210,14 +247,16 @@ def main() -> None:
         return
     torch.set_num_threads(int(os.environ.get("OMP_NUM_THREADS", "2")))
     print(f"load before: {os.getloadavg()}")
-    results = (part_accuracy(a.repeats, a.accuracy_lenses.split(","), tuple(a.knobs.split(",")))
+    results = (part_accuracy(a.repeats, a.accuracy_lenses.split(","), tuple(a.knobs.split(",")), a.merge)
                if "accuracy" in parts else {})
     if "third" in parts:
         part_third(results)
     if "commands" in parts:
-        print("\n| lens | command | eager s (before) | auto s (default) | compiled s | compiled runs |")
-        print("| --- | --- | --- | --- | --- | --- |")
-        part_commands(a.repeats, a.lenses.split(","), a.commands.split(",") if a.commands else None)
+        backends = a.backends.split(",")
+        print("\n| lens | command | " + " | ".join(f"{b} s" for b in backends) + " | load |")
+        print("| --- | --- | " + " | ".join("---" for _ in backends) + " | --- |")
+        part_commands(a.repeats, a.lenses.split(","), a.commands.split(",") if a.commands else None, backends,
+                      a.cache_dir, a.commands_json)
     if "illumination" in parts:
         part_illumination(401)
     print(f"load after: {os.getloadavg()}")

@@ -529,6 +529,7 @@ from lensopt import (  # noqa: E402
     cli_restore,
     cli_sweep,
     cli_tolerance,
+    cli_warmup,
     cli_zemax,
 )
 
@@ -540,6 +541,7 @@ cli_zemax.register(app)
 cli_restore.register(app)
 cli_optimize.register(app)
 cli_sweep.register(app)
+cli_warmup.register(app)
 
 if __name__ == "__main__":  # pragma: no cover
     app()

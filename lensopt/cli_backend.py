@@ -1,4 +1,4 @@
-"""The ``--backend`` option shared by the commands that trace many rays (trace, plot psf, simulate)."""
+"""The ``--backend`` option shared by the commands that trace many rays (trace, plot psf, simulate, evaluate)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ from rich.console import Console
 F = TypeVar("F", bound=Callable[..., Any])
 
 BackendOpt = Annotated[str, typer.Option(
-    "--backend", help="Trace backend: auto (compile once enough rays were traced) | eager | compiled.")]
+    "--backend", help="Trace backend: auto (the compiled trace when `lensopt warmup` compiled this lens "
+    "structure, else eager) | eager | compiled.")]
 
 
 def with_backend(err_console: Console) -> Callable[[F], F]:

@@ -2,7 +2,8 @@
 
 Every knob that trades accuracy for time is swept alone, the others at their defaults, and each
 setting is scored by the error of what the user asked for against a converged reference, and by its
-wall time (median of ``repeats`` runs, compilation excluded and reported apart):
+wall time (median of ``repeats`` runs, compilation excluded and reported apart; every knob but ``compiled``
+traces eagerly, so that no backend switch lands inside a knob's timing):
 
 ============  ==========================================  =============================================
 knob          settings                                    error (against)
@@ -271,7 +272,9 @@ def _psf_points(model: Model, knobs: Sequence[str], repeats: int, pitch_um: floa
     rel = torch.tensor(system.rel_field, dtype=torch.float64)
     pitch = pitch_um * 1e-3
     base = PsfSettings(sampling="rings:32", pitch_mm=pitch, diffraction="heuristic")
-    with torch.no_grad():
+    # Every PSF here is traced eagerly (the ``compiled`` knob measures the backend): under ``auto`` the
+    # rays of the FFT reference would otherwise trigger an in-process compilation inside some knob's timing.
+    with torch.no_grad(), use_backend("eager"):
         size = compute_psfs(lens, system, rel, base).psf.shape[-1]
         size = max(size | 1, 31)
         center = compute_psfs(lens, system, rel, PsfSettings(sampling="rings:64", pitch_mm=pitch, size=size)).center
@@ -309,7 +312,7 @@ def _psf_points(model: Model, knobs: Sequence[str], repeats: int, pitch_um: floa
             s = PsfSettings(**{**base.__dict__, "size": size, **kw})
 
             def run(s: PsfSettings = s) -> Tensor:
-                with torch.no_grad():
+                with torch.no_grad(), use_backend("eager"):
                     return compute_psfs(lens, system, rel, s).psf
 
             psf, t = _timed(run, repeats)
@@ -334,16 +337,17 @@ def _sim_points(model: Model, knobs: Sequence[str], repeats: int,
 
     def simulate(**kw: Any) -> np.ndarray:
         opts = PlanOptions(**{"sampling": "rings:16", **kw})
-        plan, pilot, reg, sensor = plan_scene(model, info, region="corner",
-                                              effects=parse_effects("+convolution,-noise"), options=opts)
-        with torch.inference_mode():
+        with use_backend("eager"):
+            plan, pilot, reg, sensor = plan_scene(model, info, region="corner",
+                                                  effects=parse_effects("+convolution,-noise"), options=opts)
+        with torch.inference_mode(), use_backend("eager"):
             return run_plan(model, plan, pilot, reg, sensor, img, opts).image
 
     progress("reference simulation (12x9 grid, 36 fields, rings:48)")
     t0 = time.perf_counter()
     try:
         ref = simulate(grid=(12, 9), fields=36, sampling="rings:48")
-    except LensoptError as err:  # e.g. no [sensor], or no rgb_weights for more than 3 wavelengths
+    except LensoptError as err:  # e.g. no [sensor] (RGB weights are derived from the spectrum, S4.1.2)
         return [], {"skipped": f"the lens cannot simulate the RGB test scene: {err}"}
     ref_info = {"grid": "12x9", "fields": 36, "sampling": "rings:48", "time_s": time.perf_counter() - t0,
                 "image": f"coffee.png {w}x{h} on the sensor corner"}

@@ -17,9 +17,10 @@ from typer.testing import CliRunner
 
 from lensopt.cli import app
 from lensopt.errors import LensoptError
-from lensopt.optics import backend
+from lensopt.optics import aot, backend
 from lensopt.optics.backend import choose_backend, current_backend, on_compile, trace_with, use_backend
 from lensopt.optics.bundle import trace_bundle
+from lensopt.optics.intersect import NEWTON_ITERATIONS
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec import build, load_spec
 
@@ -42,6 +43,7 @@ def test_compiled_bundle_equals_eager_to_1e12_mm_and_first_compile_is_reported_o
     pupil = PupilSampling.parse("rings:12").points(dtype=lens.dtype)
     monkeypatch.setattr(backend, "compile_log_path", lambda: tmp_path / "lensopt_compiles.json")
     monkeypatch.setattr(backend, "_compiled_keys", set())
+    monkeypatch.setattr(aot, "package_dir", lambda: tmp_path / "no_packages")  # torch.compile, not a package
     seen: list[tuple[str, float]] = []
     remove = on_compile(lambda desc, s: seen.append((desc, s)))
     try:
@@ -123,3 +125,148 @@ def test_cli_trace_same_numbers_on_both_backends() -> None:
     for fe, fc in zip(out["eager"]["fields"], out["compiled"]["fields"], strict=True):
         assert fc["rms_spot_radius_um"] == pytest.approx(fe["rms_spot_radius_um"], abs=1e-9)
         assert fc["failed_rays"] == fe["failed_rays"]
+
+
+def test_compiled_calls_get_one_fixed_shape_and_the_padding_is_cut_off(monkeypatch) -> None:
+    """The chunking around the compiled kernels (``backend._compiled_in_chunks``): every kernel call gets
+    exactly ``size`` rays (``COMPILED_CHUNK``, ``aot.AOT_CHUNK``) in the same layout, whatever the batch;
+    the result is the one-pass trace's, bit for bit (the kernel stand-in here is the eager trace itself:
+    elementwise IEEE arithmetic does not depend on how the rays are split or padded), for a batch of
+    several chunks with a short last one, for a batch shorter than one chunk, with recorded hits and
+    broadcast wavelengths."""
+    from lensopt.optics.trace import trace
+
+    model = build(load_spec(CMOUNT))
+    lens, system = model.lens, model.system
+    pupil = PupilSampling.parse("rings:6").points(dtype=lens.dtype)
+    seen: list[tuple] = []
+
+    def kernel(lens, rays, **kw):  # type: ignore[no-untyped-def]
+        seen.append((rays.pos.shape, rays.pos.stride(), rays.dir.stride(), rays.wavelength.shape))
+        return trace(lens, rays, **kw)
+
+    captured = []
+    real = backend.trace_with
+    monkeypatch.setattr("lensopt.optics.bundle.trace_with",
+                        lambda lens, rays, **kw: captured.append(rays) or real(lens, rays, **kw))
+    trace_bundle(lens, system, pupil, half_pupil=True, backend="eager")
+    rays = captured[-1]  # (F, W, P, 3) positions, (1, W, 1) wavelengths: broadcast
+    n = torch.broadcast_shapes(rays.pos.shape[:-1], rays.wavelength.shape).numel()
+    for chunk, record in ((97, True), (1000, False), (4 * n, True)):  # many chunks; short last; one padded
+        seen.clear()
+        ref = trace(lens, rays, record=record)
+        got = backend._compiled_in_chunks(kernel, lens, rays, size=chunk, record=record, upto=None,
+                                          newton_iterations=NEWTON_ITERATIONS)
+        assert len(seen) == -(-n // chunk)
+        assert {s for s in seen} == {(torch.Size([chunk, 3]), (1, chunk), (1, chunk), torch.Size([chunk]))}
+        for a, b in ((ref.pos, got.pos), (ref.dir, got.dir), (ref.status, got.status),
+                     (ref.backtrack, got.backtrack), (ref.failed_at, got.failed_at)):
+            assert (a is None and b is None) or (a.shape == b.shape and torch.equal(a, b))
+        assert len(ref.hits) == len(got.hits) == (lens.num_surfaces if record else 0)
+        for ha, hb in zip(ref.hits, got.hits, strict=True):
+            assert torch.equal(ha.pos, hb.pos) and torch.equal(ha.cos2_out, hb.cos2_out)
+
+
+def test_aot_package_equals_eager_to_1e12_mm_with_every_failure_reason() -> None:
+    """An AOT package (``optics.aot``) of the lens that takes every code path of the trace (Newton on an
+    asphere, a clipped hyperboloid, a diffractive surface; misses, TIR, Newton failures, clipping), with
+    recorded hits, against the eager trace: 1e-12 mm on every intercept, identical statuses and failure
+    surfaces, for a batch of several chunks (the last one padded). The package is built once per machine
+    (tens of seconds of CPU) in the default package folder, so later runs only load it."""
+    from test_compiled_trace import MIXED, _rays
+
+    from lensopt.optics.trace import REASONS, Status, trace
+    from lensopt.spec import parse_spec
+
+    lens = build(parse_spec(MIXED)).lens
+    if not aot.has_package(lens, record=True):
+        aot.build_package(lens, record=True)
+    rays = _rays(2 * aot.AOT_CHUNK + 1000)
+    with torch.no_grad():
+        assert choose_backend(lens, rays.pos.shape[0], record=True) == "aot"  # auto, a package on disk
+        eager = trace(lens, rays, record=True)
+        fast = trace_with(lens, rays, record=True)
+    assert {int(v) for v in eager.status.unique()} >= {int(r) for r in REASONS if r != Status.BLOCKED}
+    assert torch.equal(eager.status, fast.status) and torch.equal(eager.failed_at, fast.failed_at)
+    assert torch.equal(eager.backtrack, fast.backtrack)
+    ok = eager.valid
+    assert ok.sum() > 0.2 * ok.numel()
+    assert len(fast.hits) == len(eager.hits) == lens.num_surfaces
+    for he, hf in zip(eager.hits, fast.hits, strict=True):
+        assert (he.pos - hf.pos)[ok].abs().max() < 1e-12 and (he.t - hf.t)[ok].abs().max() < 1e-12
+        assert (he.dir_out - hf.dir_out)[ok].abs().max() < 1e-12
+    # On the image plane, 30 mm behind the last surface, these rays (up to 60° off axis) land up to
+    # ~200 mm from the axis, where a last-bit difference in the direction becomes a few 1e-12 mm: the
+    # bound there is 1e-12 mm per mm of height beyond 1 mm (1e-12 relative).
+    scale = eager.pos.abs().clamp_min(1.0)
+    assert ((eager.pos - fast.pos).abs() / scale)[ok].max() < 1e-12 and (eager.dir - fast.dir)[ok].abs().max() < 1e-12
+    # A call that needs gradients never goes to a package (no autograd through it).
+    assert choose_backend(lens, 10**6, record=True, grad=True) == "eager"
+    assert choose_backend(lens, 10**6, record=True, grad=True, backend="compiled") == "compiled"
+
+
+def test_auto_without_a_package_stays_eager(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))  # an empty cache: no package
+    lens = build(load_spec(COOKE)).lens
+    assert aot.package_dir() == tmp_path / "lensopt_aot" and not aot.has_package(lens)
+    assert choose_backend(lens, 10**6) == "eager"
+    assert choose_backend(lens, 10**6, backend="compiled") == "compiled"
+
+
+@pytest.mark.slow  # builds the C-mount lens's recorded package when this machine has none: minutes
+def test_aot_bundle_equals_eager_to_1e12_mm_on_the_cmount_lens() -> None:
+    model = build(load_spec(CMOUNT))
+    lens, system = model.lens, model.system
+    if not aot.has_package(lens, record=True):
+        aot.build_package(lens, record=True)
+    pupil = PupilSampling.parse("rings:32").points(dtype=lens.dtype)
+    with torch.no_grad():
+        eager = trace_bundle(lens, system, pupil, half_pupil=True, record=True, backend="eager")
+        fast = trace_bundle(lens, system, pupil, half_pupil=True, record=True)  # auto: the package
+    assert choose_backend(lens, 10**5, record=True) == "aot"
+    ok = eager.result.valid
+    assert torch.equal(eager.result.status, fast.result.status)
+    assert torch.equal(eager.result.failed_at, fast.result.failed_at)
+    assert (eager.result.pos - fast.result.pos)[ok].abs().max() < 1e-12
+    assert (eager.result.dir - fast.result.dir)[ok].abs().max() < 1e-12
+    for he, hc in zip(eager.result.hits, fast.result.hits, strict=True):
+        assert (he.pos - hc.pos)[ok].abs().max() < 1e-12
+
+
+def test_auto_sends_small_calls_to_a_package_only_once_it_is_loaded(tmp_path, monkeypatch) -> None:
+    """``AOT_MIN_RAYS``: loading a package costs milliseconds, so a small call does not load one; once
+    loaded (by a larger call) the package takes calls of any size. (Stand-in package files and loader:
+    only the choice is tested here.)"""
+    monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
+    lens = build(load_spec(COOKE)).lens
+    path = aot.package_path(lens)
+    path.parent.mkdir(parents=True)
+    path.write_bytes(b"stand-in")
+    monkeypatch.setattr(aot, "_loaded", {})
+    assert choose_backend(lens, backend.AOT_MIN_RAYS - 1) == "eager"
+    assert choose_backend(lens, backend.AOT_MIN_RAYS) == "aot"
+    aot._loaded[path] = object()  # what the first aot_trace call does
+    assert choose_backend(lens, 9) == "aot"
+    assert choose_backend(lens, 9, record=True) == "eager"  # another structure, no package
+
+
+def test_a_damaged_package_falls_back_to_eager_once(tmp_path, monkeypatch, caplog) -> None:
+    """A package file that does not load (truncated, foreign): the call is traced eagerly (same numbers),
+    a warning names the file, and the structure is not offered to the package again in this process."""
+    monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(aot, "_loaded", {})
+    monkeypatch.setattr(aot, "_broken", set())
+    model = build(load_spec(COOKE))
+    lens = model.lens
+    path = aot.package_path(lens)
+    path.parent.mkdir(parents=True)
+    path.write_bytes(b"not a package")
+    pupil = PupilSampling.parse("rings:32").points(dtype=lens.dtype)
+    with torch.no_grad():
+        eager = trace_bundle(lens, model.system, pupil, half_pupil=True, backend="eager")
+        assert choose_backend(lens, 10**5) == "aot"
+        with caplog.at_level("WARNING", logger="lensopt.optics.backend"):
+            got = trace_bundle(lens, model.system, pupil, half_pupil=True)
+    assert torch.equal(got.result.pos, eager.result.pos) and torch.equal(got.result.status, eager.result.status)
+    assert str(path) in caplog.text
+    assert choose_backend(lens, 10**5) == "eager"
