@@ -6,7 +6,10 @@ Jacobian costs ~20–30 residual evaluations although its arithmetic is only ~N 
 optimization rays are few (hundreds to a few thousand), so every one of the thousands of small
 vmapped dual-number operations costs its Python and dispatch overhead. Here ``make_fx`` runs
 ``jacfwd`` once on real tensors and records the aten graph (vmap and the jvp rules decomposed into
-plain batched operations, ~10⁴ nodes); Inductor compiles that graph into a few fused C++ loops.
+plain batched operations, ~10⁴ nodes); Inductor compiles that graph into a few fused C++ loops. The
+graph goes to Inductor as it is (``torch._inductor.compile``): ``torch.compile`` of the GraphModule
+would first re-trace its generated Python with Dynamo, which cost the Cooke graph more than 2.3× the
+CPU time of the direct compile (benchmarks/RESULTS.md, issue 14 session 21).
 
 Safety of the capture: ``make_fx`` refuses data-dependent Python control flow on the traced values
 (``.item()``, ``bool(tensor)`` of anything that depends on θ raises), so a residual function that
@@ -15,8 +18,10 @@ pupil sample, weights, the lens structure) become constants of the graph, which 
 ``Problem``. The first call compares the compiled Jacobian with the eager one (relative 1e-9 of
 the largest entry); on any failure the eager Jacobian is used from then on and a warning is logged.
 
-Cost: the capture and compile take tens of seconds to minutes per problem (more on a loaded
-machine; Inductor caches kernels on disk); it pays on long runs, not on a 20-step test.
+Cost: the capture and compile take minutes of CPU per problem on the 2-core development machine (Cooke:
+~2 minutes of CPU, direct compile); a second process with the same cache directory was seen lowering
+the graph again (no hit in Inductor's graph cache); it pays on long runs, not on a 20-step test, and not on one C-mount design, whose
+whole eager run costs less CPU than its two compiles (glass binding builds a second problem).
 """
 
 from __future__ import annotations
