@@ -22,7 +22,7 @@ from pathlib import Path
 
 import torch
 
-from lensopt.optim import Problem
+from lensopt.design import build_problem
 from lensopt.optim.compiled_jacobian import capture_jacobian
 from lensopt.spec import load_spec
 
@@ -32,7 +32,7 @@ SPECS = Path(__file__).resolve().parents[1] / "specs"
 def main() -> None:
     torch.set_num_threads(1)
     spec, mode = sys.argv[1], sys.argv[2]
-    p = Problem(load_spec(SPECS / spec))
+    p = build_problem(load_spec(SPECS / spec))
     th = p.theta0
     t0 = time.perf_counter()
     gm = capture_jacobian(p.residuals, th)

@@ -15,7 +15,7 @@ from pathlib import Path
 import torch
 from torch.utils._python_dispatch import TorchDispatchMode
 
-from lensopt.optim import Problem
+from lensopt.design import build_problem
 from lensopt.spec import load_spec
 
 SPECS = Path(__file__).resolve().parents[1] / "specs"
@@ -38,7 +38,7 @@ class Count(TorchDispatchMode):
 
 def main() -> None:
     torch.set_num_threads(1)
-    p = Problem(load_spec(SPECS / (sys.argv[1] if len(sys.argv) > 1 else "cmount_4p.toml")))
+    p = build_problem(load_spec(SPECS / (sys.argv[1] if len(sys.argv) > 1 else "cmount_4p.toml")))
     p.jacobian(p.theta0)
     with Count():
         p.jacobian(p.theta0)

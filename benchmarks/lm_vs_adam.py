@@ -40,6 +40,7 @@ from pathlib import Path
 
 import torch
 
+from lensopt.design import build_problem
 from lensopt.optics.backend import set_backend
 from lensopt.optim import Problem
 from lensopt.optim.run import make_optimizer, retain_freed_memory
@@ -50,11 +51,11 @@ SPECS = Path(__file__).resolve().parents[1] / "specs"
 
 def problem(name: str) -> Problem:
     if name == "cooke":
-        return Problem(load_spec(SPECS / "cooke_triplet_opt.toml"))
+        return build_problem(load_spec(SPECS / "cooke_triplet_opt.toml"))
     spec = load_spec(SPECS / "cmount_4p.toml")
     for s in spec.surfaces:
         s.vary = [v for v in s.vary if v != "material"]
-    return Problem(spec)
+    return build_problem(spec)
 
 
 CLOCKS = {"wall": time.perf_counter, "cpu": time.process_time}

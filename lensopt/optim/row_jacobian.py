@@ -74,7 +74,7 @@ def _angle_x(c: TermContext) -> list[Tensor]:
 def _normal_x(c: TermContext) -> list[Tensor]:
     hits = c.bundle.result.hits
     c2 = math.cos(math.radians(c.problem.opt.constraints.surface_normal.max_deg)) ** 2
-    refracting = [s for s in c.problem.interfaces if not c.problem.spec.surfaces[s].type == "plane"]
+    refracting = [s for s in c.problem.interfaces if not c.problem.surfaces[s].plane]
     return [c2 - hits[s].normal[..., 2] ** 2 for s in refracting]
 
 

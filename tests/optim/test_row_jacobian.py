@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import torch
 
+from lensopt.design import build_problem
 from lensopt.optim import Problem
 from lensopt.optim.residuals import gap_lengths
 from lensopt.optim.row_jacobian import row_jacobian
@@ -20,7 +21,7 @@ def _problem(make_cooke, **constraints) -> Problem:  # noqa: ANN001
     for s in (0, 2, 4):
         data["surfaces"][s]["vary"] = ["radius", "thickness"]
     data["system"]["field"]["relative"] = [0.0, 1.0]
-    return Problem(parse_spec(data))
+    return build_problem(parse_spec(data))
 
 
 def _assert_same(p: Problem, theta: torch.Tensor) -> None:
