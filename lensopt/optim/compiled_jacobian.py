@@ -8,7 +8,7 @@ vmapped dual-number operations costs its Python and dispatch overhead. Here ``ma
 ``jacfwd`` once on real tensors and records the aten graph (vmap and the jvp rules decomposed into
 plain batched operations, ~10⁴ nodes); Inductor compiles that graph into a few fused C++ loops. The
 graph goes to Inductor as it is (``torch._inductor.compile``): ``torch.compile`` of the GraphModule
-would first re-trace its generated Python with Dynamo, which cost the Cooke graph more than 2.3× the
+would first re-trace its generated Python with Dynamo, which cost the Cooke graph more than twice the
 CPU time of the direct compile (benchmarks/RESULTS.md, issue 14 session 21).
 
 Safety of the capture: ``make_fx`` refuses data-dependent Python control flow on the traced values
@@ -87,7 +87,7 @@ class CompiledJacobian:
         problem: the optimization problem (its residual function is captured at the first call).
         backend: ``inductor`` (the captured aten graph handed to Inductor directly: compiled C++/Triton
             kernels), ``dynamo`` (the same graph through ``torch.compile``, which first re-traces its
-            Python code with Dynamo: the same kernels for ~1.8× the compile time; kept for comparison)
+            Python code with Dynamo: more than twice the compile time; kept for comparison)
             or ``graph`` (the captured graph run as Python, no compiler: for tests of the capture).
         check: compare the first compiled Jacobian with the eager one.
     """
