@@ -21,7 +21,7 @@ the largest entry); on any failure the eager Jacobian is used from then on and a
 Cost: the capture and compile take minutes of CPU per problem on the 2-core development machine (Cooke:
 ~2 minutes of CPU, direct compile); a second process with the same cache directory was seen lowering
 the graph again (no hit in Inductor's graph cache); it pays on long runs, not on a 20-step test, and
-not on one C-mount design, whose whole eager run (81 s of CPU) costs less than one compile of the
+not on one C-mount design, whose whole eager run (73–85 s of CPU) costs less than one compile of the
 smaller Cooke graph (114 s), and which would compile two graphs (glass binding builds a second problem).
 """
 
