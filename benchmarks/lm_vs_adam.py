@@ -32,6 +32,7 @@ of its clock, and runs would not see the same residual function.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -68,8 +69,8 @@ def run(p: Problem, method: str, budget_s: float, lr: float | None = None,
     (perf_counter) or ``cpu`` (this process's CPU time: one thread, so on an idle machine the same
     as wall time, and robust to the load of other processes)."""
     now = CLOCKS[clock]
-    if lr is not None:
-        p.opt.adam.lr = lr
+    if lr is not None:  # the settings are frozen dataclasses
+        p.opt = dataclasses.replace(p.opt, adam=dataclasses.replace(p.opt.adam, lr=lr))
     opt = make_optimizer(p, p.theta0, method, jacobian if method == "lm" else "eager")
     compile_s = 0.0
     if method == "lm" and jacobian == "compiled":
