@@ -7,8 +7,9 @@ problems of specs/cooke_triplet_opt.toml and specs/cmount_4p.toml (start points)
         --json benchmarks/results_jacobian_compiled.json
 
 ``--compiled`` adds the compiled forward-mode Jacobian (``optim.compiled_jacobian``: make_fx of jacfwd,
-compiled by Inductor) with its one-off capture + compile time; every row also gives its cost in units
-of one eager residual evaluation measured in the same run.
+compiled by Inductor; ``--compiled-backend`` picks how) with its one-off capture + compile time (wall
+and this process's CPU time); ``--rows`` adds ``optim.row_jacobian`` (inactive ramp rows skipped);
+every row also gives its cost in units of one eager residual evaluation measured in the same run.
 
 Prints a markdown table: median wall time per Jacobian, ratio to jacfwd, and the largest difference
 from jacfwd relative to the largest Jacobian entry. Reverse mode is skipped for problems with more than
@@ -34,17 +35,22 @@ from lensopt.spec import load_spec
 SPECS = Path(__file__).resolve().parents[1] / "specs"
 
 
+CLOCK = {"now": time.perf_counter}
+
+
 def _time(fn, repeats: int) -> tuple[float, torch.Tensor]:  # noqa: ANN001
     out = fn()  # warm-up (functorch's first call builds its rules)
     times = []
+    now = CLOCK["now"]
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0 = now()
         out = fn()
-        times.append(time.perf_counter() - t0)
+        times.append(now() - t0)
     return statistics.median(times), out
 
 
-def bench(spec_name: str, repeats: int, jacrev_max_rows: int, compiled: bool = False, fd: bool = True) -> dict:
+def bench(spec_name: str, repeats: int, jacrev_max_rows: int, compiled: bool = False, fd: bool = True,
+          backend: str = "inductor", rows_skipped: bool = False) -> dict:
     p = build_problem(load_spec(SPECS / spec_name))
     theta = p.theta0
     N, M = p.num_variables, p.size
@@ -76,20 +82,29 @@ def bench(spec_name: str, repeats: int, jacrev_max_rows: int, compiled: bool = F
     rows["jacfwd (forward mode)"] = (t_fwd, J)
     extra = {}
     if compiled:
+        from torch.fx.experimental.proxy_tensor import make_fx  # noqa: F401 - imported before the clock
+
         from lensopt.optim.compiled_jacobian import CompiledJacobian
 
-        cj = CompiledJacobian(p, check=False)
-        t0 = time.perf_counter()
+        cj = CompiledJacobian(p, check=False, backend=backend)
+        t0, c0 = time.perf_counter(), time.process_time()
         cj(theta)
-        extra["compile_s"] = time.perf_counter() - t0
+        extra["compile_s"], extra["compile_cpu_s"] = time.perf_counter() - t0, time.process_time() - c0
         extra["compiled"] = cj.compiled
-        rows["jacfwd compiled (make_fx + Inductor)"] = _time(lambda: cj(theta)[0], repeats)
+        extra["compile_backend"] = backend
+        label = {"inductor": "make_fx + Inductor", "dynamo": "make_fx + torch.compile",
+                 "graph": "make_fx graph, no compiler"}
+        rows[f"jacfwd compiled ({label[backend]})"] = _time(lambda: cj(theta)[0], repeats)
         # The compile takes minutes: time the eager references again right beside the compiled row, so
         # that a change of machine load during the compile does not bias the ratios.
         t_res, _ = _time(lambda: p.residuals(theta).detach(), repeats)
         rows["one residual evaluation"] = (t_res, None)
         t_fwd, J = _time(lambda: p.jacobian(theta)[0], repeats)
         rows["jacfwd (forward mode)"] = (t_fwd, J)
+    if rows_skipped:
+        from lensopt.optim.row_jacobian import row_jacobian
+
+        rows["jacfwd, inactive ramp rows skipped (row_jacobian)"] = _time(lambda: row_jacobian(p, theta)[0], repeats)
     if M <= jacrev_max_rows:
         rows["jacrev (reverse mode)"] = _time(lambda: torch.func.jacrev(p.residuals)(theta), max(1, repeats // 2))
     if fd:
@@ -111,19 +126,32 @@ def main() -> None:
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--compiled", action="store_true", help="add the compiled forward-mode Jacobian")
     ap.add_argument("--no-fd", action="store_true", help="skip the finite-difference rows")
+    ap.add_argument("--compiled-backend", choices=["inductor", "dynamo", "graph"], default="inductor",
+                    help="how --compiled compiles the captured graph (CompiledJacobian's backend)")
+    ap.add_argument("--rows", action="store_true", help="add row_jacobian (inactive ramp rows skipped)")
+    ap.add_argument("--clock", choices=["wall", "cpu"], default="wall",
+                    help="time each call by wall time or by this process's CPU time (load-robust)")
     ap.add_argument("--specs", default="cooke_triplet_opt.toml,cmount_4p.toml")
     args = ap.parse_args()
+    if args.clock == "cpu":
+        CLOCK["now"] = time.process_time
+    from lensopt.optim.run import retain_freed_memory
+
+    retain_freed_memory()  # as `lensopt optimize` runs
     results = {
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "torch": torch.__version__,
-                    "threads": torch.get_num_threads(), "loadavg_before": os.getloadavg()},
+                    "threads": torch.get_num_threads(), "loadavg_before": os.getloadavg(),
+                    "clock": args.clock},
         "problems": [],
     }
     for spec in args.specs.split(","):  # each table printed as soon as it is measured
-        prob = bench(spec, args.repeats, args.jacrev_max_rows, args.compiled, not args.no_fd)
+        prob = bench(spec, args.repeats, args.jacrev_max_rows, args.compiled, not args.no_fd, args.compiled_backend,
+                     args.rows)
         results["problems"].append(prob)
         print(f"\n{prob['spec']}: N = {prob['variables']} variables, M = {prob['residuals']} residuals")
         if "compile_s" in prob:
-            print(f"compiled Jacobian: capture + compile {prob['compile_s']:.0f} s (compiled: {prob['compiled']})")
+            print(f"compiled Jacobian ({prob['compile_backend']}): capture + compile {prob['compile_s']:.0f} s wall, "
+                  f"{prob['compile_cpu_s']:.0f} s CPU (compiled: {prob['compiled']})")
         print("\n| method | median s | × jacfwd | residual evaluations | max |ΔJ| / max |J| |")
         print("| --- | ---: | ---: | ---: | ---: |")
         for r in prob["rows"]:

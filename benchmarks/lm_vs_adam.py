@@ -10,7 +10,16 @@ learning rates (the best is reported); LM with the Table S7 defaults.
         --plot benchmarks/lm_vs_adam.png
 
 ``--jacobian compiled`` gives LM the compiled forward-mode Jacobian (``optim.compiled_jacobian``); its
-one-off capture + compile runs before the clock starts and is reported beside the curves. The
+one-off capture + compile runs before the clock starts and is reported beside the curves
+(``--jacobian eager compiled``: one LM run with each).
+
+On a loaded machine: ``--clock cpu`` measures every run by its own process CPU time (one thread, so on
+an idle machine the same as its wall time) and ``--parallel`` runs them at once, each in its own
+process (the load the other sessions put on the machine then slows every run alike and does not enter
+the clock); ``--lm-budget`` stops LM sooner (its time to the target merit is what is compared).
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/lm_vs_adam.py --problem cmount --budget 180 --lm-budget 60 \
+        --lrs 2e-3 4e-3 8e-3 --jacobian eager compiled --clock cpu --parallel The
 "time to merit" table gives, for the merit the best Adam run reaches within the budget, how soon each
 run first reaches it, and LM's lead over that Adam run (its time / LM's time).
 
@@ -23,6 +32,7 @@ of its clock, and runs would not see the same residual function.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -34,7 +44,7 @@ import torch
 from lensopt.design import build_problem
 from lensopt.optics.backend import set_backend
 from lensopt.optim import Problem
-from lensopt.optim.run import make_optimizer
+from lensopt.optim.run import make_optimizer, retain_freed_memory
 from lensopt.spec import load_spec
 
 SPECS = Path(__file__).resolve().parents[1] / "specs"
@@ -49,30 +59,46 @@ def problem(name: str) -> Problem:
     return build_problem(spec)
 
 
+CLOCKS = {"wall": time.perf_counter, "cpu": time.process_time}
+
+
 def run(p: Problem, method: str, budget_s: float, lr: float | None = None,
-        jacobian: str = "eager") -> tuple[list[tuple[float, float]], float]:
-    """(wall s, best merit so far) after every step until the budget is spent, and the seconds of
-    the one-off Jacobian compile before the clock started (0 for eager)."""
-    if lr is not None:
-        p.opt.adam.lr = lr
+        jacobian: str = "eager", clock: str = "wall") -> tuple[list[tuple[float, float]], float]:
+    """(seconds, best merit so far) after every step until the budget is spent, and the seconds of
+    the one-off Jacobian compile before the clock started (0 for eager). ``clock``: ``wall``
+    (perf_counter) or ``cpu`` (this process's CPU time: one thread, so on an idle machine the same
+    as wall time, and robust to the load of other processes)."""
+    now = CLOCKS[clock]
+    if lr is not None:  # the settings are frozen dataclasses
+        p.opt = dataclasses.replace(p.opt, adam=dataclasses.replace(p.opt.adam, lr=lr))
     opt = make_optimizer(p, p.theta0, method, jacobian if method == "lm" else "eager")
     compile_s = 0.0
     if method == "lm" and jacobian == "compiled":
-        t0 = time.perf_counter()
+        t0 = now()
         opt._jacobian(p.theta0)  # capture + compile + check against eager, outside the clock
-        compile_s = time.perf_counter() - t0
+        compile_s = now() - t0
         if not opt._jacobian.compiled:
             raise RuntimeError(f"compiled Jacobian unavailable: {opt._jacobian.failed}")
     one = torch.ones(p.size, dtype=p.dtype)
-    t0 = time.perf_counter()
+    t0 = now()
     best = opt.merit(one)
     trace = [(0.0, best)]
-    while time.perf_counter() - t0 < budget_s:
+    while now() - t0 < budget_s:
         info = opt.step(one)
         if info.accepted and math.isfinite(info.merit):
             best = min(best, info.merit)
-        trace.append((time.perf_counter() - t0, best))
+        trace.append((now() - t0, best))
     return trace, compile_s
+
+
+def _worker(name: str, method: str, budget_s: float, lr: float | None, jacobian: str, clock: str,
+            backend: str) -> tuple[str, list[tuple[float, float]], float, tuple[float, float, float]]:
+    """One optimizer run in a fresh process (``--parallel``)."""
+    torch.set_num_threads(1)
+    set_backend(backend)
+    retain_freed_memory()
+    trace, compile_s = run(problem(name), method, budget_s, lr, jacobian, clock)
+    return method, trace, compile_s, os.getloadavg()
 
 
 def first_reach(trace: list[tuple[float, float]], merit: float) -> float:
@@ -88,6 +114,7 @@ def thin(trace: list[tuple[float, float]], points: int = 400) -> list[list[float
 
 
 def at(trace: list[tuple[float, float]], t: float) -> float:
+    """Best merit at ``t`` (the run's last, when its budget was shorter)."""
     return min(m for s, m in trace if s <= t)
 
 
@@ -96,50 +123,82 @@ def main() -> None:
     ap.add_argument("--problem", choices=["cmount", "cooke"], default="cmount")
     ap.add_argument("--budget", type=float, default=180.0, help="wall seconds per optimizer run")
     ap.add_argument("--lrs", type=float, nargs="+", default=[1e-4, 1e-3, 1e-2])
-    ap.add_argument("--jacobian", choices=["eager", "compiled"], default="eager", help="LM's Jacobian")
+    ap.add_argument("--jacobian", choices=["eager", "compiled"], nargs="+", default=["eager"],
+                    help="LM's Jacobian (several: one LM run each)")
     ap.add_argument("--backend", choices=["eager", "compiled", "auto"], default="eager",
                     help="trace backend of the residual function, for every run")
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--plot", type=Path, default=None)
+    ap.add_argument("--clock", choices=sorted(CLOCKS), default="wall",
+                    help="wall: perf_counter; cpu: each run's process CPU time (load-robust)")
+    ap.add_argument("--lm-budget", type=float, default=None,
+                    help="LM's budget, if shorter (its time to the target merit is what is compared)")
+    ap.add_argument("--parallel", action="store_true",
+                    help="every run in its own process, all at once (with --clock cpu)")
     args = ap.parse_args()
     load_before = os.getloadavg()
+    torch.set_num_threads(1)
+    retain_freed_memory()
     p = problem(args.problem)
     set_backend(args.backend)
-    lm_name = "LM (Table S7)" + (", compiled Jacobian" if args.jacobian == "compiled" else "")
-    runs = {}
-    runs[lm_name], compile_s = run(p, "lm", args.budget, jacobian=args.jacobian)
-    for lr in args.lrs:
-        runs[f"Adam lr={lr:g}"], _ = run(problem(args.problem), "adam", args.budget, lr)
-    start = runs[lm_name][0][1]
+    lm_names = {j: "LM (Table S7)" + (", compiled Jacobian" if j == "compiled" else ", eager Jacobian"
+                                       if len(args.jacobian) > 1 else "") for j in args.jacobian}
+    jobs = ([(lm_names[j], "lm", None, j) for j in args.jacobian]
+            + [(f"Adam lr={lr:g}", "adam", lr, "eager") for lr in args.lrs])
+    budgets = {"lm": args.lm_budget or args.budget, "adam": args.budget}
+    runs, compile_s = {}, {}
+    if args.parallel:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(len(jobs), mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = {name: pool.submit(_worker, args.problem, method, budgets[method], lr, jac, args.clock,
+                                         args.backend) for name, method, lr, jac in jobs}
+            for name, fut in futures.items():
+                _, runs[name], compile_s[name], _ = fut.result()
+    else:
+        for name, method, lr, jac in jobs:
+            runs[name], compile_s[name] = run(p if method == "lm" else problem(args.problem), method, budgets[method],
+                                              lr, jac, args.clock)
+    start = runs[jobs[0][0]][0][1]
+    mode = ", runs in parallel" if args.parallel else ""
     checkpoints = [args.budget * f for f in (0.1, 0.25, 0.5, 1.0)]
     print(f"problem {args.problem}: N = {p.num_variables}, M = {p.size}, start merit {start:.4e}, "
-          f"budget {args.budget:g} s per run, load average {load_before} → {os.getloadavg()}\n")
+          f"budget {args.budget:g} s ({args.clock} clock{mode}) per run"
+          + (f" (LM {budgets['lm']:g} s)" if budgets["lm"] != args.budget else "")
+          + f", load average {load_before} → {os.getloadavg()}\n")
     print("| optimizer | steps | " + " | ".join(f"merit at {c:g} s" for c in checkpoints) + " |")
     print("| --- | ---: | " + " | ".join("---:" for _ in checkpoints) + " |")
     for name, tr in runs.items():
         print(f"| {name} | {len(tr) - 1} | " + " | ".join(f"{at(tr, c):.4e}" for c in checkpoints) + " |")
-    if compile_s:
-        print(f"\nOne-off capture + compile of LM's Jacobian (before the clock): {compile_s:.1f} s")
+    for name, c in compile_s.items():
+        if c:
+            print(f"\nOne-off capture + compile of {name}'s Jacobian (before the clock): {c:.1f} s")
     adams = {k: v for k, v in runs.items() if k.startswith("Adam")}
     best_adam = min(adams, key=lambda k: adams[k][-1][1])
     target = adams[best_adam][-1][1]
-    t_adam, t_lm = first_reach(adams[best_adam], target), first_reach(runs[lm_name], target)
+    t_adam = first_reach(adams[best_adam], target)
     print(f"\nTime to the merit the best Adam ({best_adam}) reaches in {args.budget:g} s, {target:.4e}:\n")
     print("| optimizer | first reaches it at (s) |\n| --- | ---: |")
     for name, tr in runs.items():
         print(f"| {name} | {first_reach(tr, target):.1f} |")
-    lead = t_adam / t_lm
-    print(f"\nLM's lead over the best Adam: {t_adam:.1f} s / {t_lm:.1f} s = **{lead:.1f}×** sooner"
-          + (f" ({t_adam:.1f} s / {t_lm + compile_s:.1f} s = {t_adam / (t_lm + compile_s):.2f}× counting the compile)"
-             if compile_s else ""))
+    leads = {}
+    for name in lm_names.values():
+        t_lm, c = first_reach(runs[name], target), compile_s[name]
+        leads[name] = {"reaches_s": t_lm, "lead": t_adam / t_lm, "compile_s": c}
+        print(f"\n{name}: lead over the best Adam {t_adam:.1f} s / {t_lm:.1f} s = **{t_adam / t_lm:.1f}×** sooner"
+              + (f" ({t_adam:.1f} s / {t_lm + c:.1f} s = {t_adam / (t_lm + c):.2f}× counting the compile)"
+                 if c else ""))
     if args.json:
         from lensopt.io.files import write_text_atomic
 
         write_text_atomic(args.json, json.dumps({
             "problem": args.problem, "variables": p.num_variables, "residuals": p.size, "budget_s": args.budget,
             "loadavg_before": load_before, "loadavg_after": os.getloadavg(), "threads": torch.get_num_threads(),
-            "jacobian": args.jacobian, "backend": args.backend, "jacobian_compile_s": compile_s, "best_adam": best_adam,
-            "target_merit": target, "best_adam_reaches_s": t_adam, "lm_reaches_s": t_lm,
+            "jacobian": args.jacobian, "backend": args.backend,
+            "clock": args.clock, "parallel": args.parallel, "lm_budget_s": budgets["lm"],
+            "jacobian_compile_s": compile_s, "best_adam": best_adam,
+            "target_merit": target, "best_adam_reaches_s": t_adam, "lm": leads,
             "runs": {k: thin(v) for k, v in runs.items()}}) + "\n")
     if args.plot:
         import matplotlib
@@ -153,7 +212,7 @@ def main() -> None:
         for name, tr in runs.items():
             ax.plot([t for t, _ in tr], [m for _, m in tr], label=name, lw=2 if name.startswith("LM") else 1)
         ax.set_yscale("log")
-        ax.set_xlabel("wall time (s)")
+        ax.set_xlabel("wall time (s)" if args.clock == "wall" else "process CPU time (s)")
         ax.set_ylabel("best merit ½‖ℓ‖²")
         ax.set_title(f"LM vs Adam, {args.problem} (N = {p.num_variables})")
         ax.grid(True, which="both", alpha=0.3)

@@ -6,7 +6,10 @@ Jacobian costs ~20–30 residual evaluations although its arithmetic is only ~N 
 optimization rays are few (hundreds to a few thousand), so every one of the thousands of small
 vmapped dual-number operations costs its Python and dispatch overhead. Here ``make_fx`` runs
 ``jacfwd`` once on real tensors and records the aten graph (vmap and the jvp rules decomposed into
-plain batched operations, ~10⁴ nodes); Inductor compiles that graph into a few fused C++ loops.
+plain batched operations, ~10⁴ nodes); Inductor compiles that graph into a few fused C++ loops. The
+graph goes to Inductor as it is (``torch._inductor.compile``): ``torch.compile`` of the GraphModule
+would first re-trace its generated Python with Dynamo, which cost the Cooke graph more than twice the
+CPU time of the direct compile (benchmarks/RESULTS.md, issue 14 session 21).
 
 Safety of the capture: ``make_fx`` refuses data-dependent Python control flow on the traced values
 (``.item()``, ``bool(tensor)`` of anything that depends on θ raises), so a residual function that
@@ -15,8 +18,11 @@ pupil sample, weights, the lens structure) become constants of the graph, which 
 ``Problem``. The first call compares the compiled Jacobian with the eager one (relative 1e-9 of
 the largest entry); on any failure the eager Jacobian is used from then on and a warning is logged.
 
-Cost: the capture and compile take tens of seconds to minutes per problem (more on a loaded
-machine; Inductor caches kernels on disk); it pays on long runs, not on a 20-step test.
+Cost: the capture and compile take minutes of CPU per problem on the 2-core development machine (Cooke:
+~2 minutes of CPU, direct compile); a second process with the same cache directory was seen lowering
+the graph again (no hit in Inductor's graph cache); it pays on long runs, not on a 20-step test, and
+not on one C-mount design, whose whole eager run (73–85 s of CPU) costs less than one compile of the
+smaller Cooke graph (114 s), and which would compile two graphs (glass binding builds a second problem).
 """
 
 from __future__ import annotations
@@ -34,6 +40,8 @@ if TYPE_CHECKING:
 __all__ = ["CompiledJacobian", "capture_jacobian"]
 
 logger = logging.getLogger(__name__)
+
+BACKENDS = ("inductor", "dynamo", "graph")
 
 CHECK_RTOL = 1e-9
 """Agreement asked of the compiled Jacobian with the eager one at the first call (max |ΔJ| / max |J|)."""
@@ -53,20 +61,40 @@ def capture_jacobian(residuals: Callable[[Tensor], Tensor], theta: Tensor) -> to
     return make_fx(torch.func.jacfwd(both, has_aux=True), tracing_mode="real")(theta)
 
 
+def _compile(gm: torch.fx.GraphModule, theta: Tensor, backend: str) -> Callable[[Tensor], tuple[Tensor, Tensor]]:
+    """The captured graph as a callable: compiled by Inductor (``inductor``: the aten graph as it is,
+    no Dynamo re-trace of its generated Python), through ``torch.compile`` (``dynamo``), or as is."""
+    if backend == "graph":
+        return gm
+    if backend == "dynamo":
+        return torch.compile(gm, fullgraph=True, dynamic=False)
+    from torch._inductor import compile as inductor_compile
+
+    compiled = inductor_compile(gm, [theta])
+
+    def call(t: Tensor) -> tuple[Tensor, Tensor]:
+        J, r = compiled(t)
+        return J, r
+
+    return call
+
+
 class CompiledJacobian:
     """θ ↦ (J (M, N), ℓ (M,)) of ``problem`` through one compiled graph; a drop-in for
     ``problem.jacobian`` (same values to ~1e-14 relative).
 
     Args:
         problem: the optimization problem (its residual function is captured at the first call).
-        backend: ``inductor`` (compiled C++/Triton kernels) or ``graph`` (the captured graph run
-            as Python, no compiler: for tests of the capture).
+        backend: ``inductor`` (the captured aten graph handed to Inductor directly: compiled C++/Triton
+            kernels), ``dynamo`` (the same graph through ``torch.compile``, which first re-traces its
+            Python code with Dynamo: more than twice the compile time; kept for comparison)
+            or ``graph`` (the captured graph run as Python, no compiler: for tests of the capture).
         check: compare the first compiled Jacobian with the eager one.
     """
 
     def __init__(self, problem: Problem, *, backend: str = "inductor", check: bool = True) -> None:
-        if backend not in ("inductor", "graph"):
-            raise ValueError(f"backend must be inductor or graph, got {backend!r}")
+        if backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
         self.problem = problem
         self.backend = backend
         self.check = check
@@ -89,7 +117,7 @@ class CompiledJacobian:
     def _build(self, theta: Tensor) -> None:
         try:
             gm = capture_jacobian(self.problem.residuals, theta)
-            fn = gm if self.backend == "graph" else torch.compile(gm, fullgraph=True, dynamic=False)
+            fn = _compile(gm, theta, self.backend)
             J, r = fn(theta)
             if self.check:
                 J0, r0 = self.problem.jacobian(theta)
