@@ -1,0 +1,214 @@
+"""Seed Table S15 (spot / raw / restored C-mount lenses, each with its own restoration network) at a
+budget that fits a shared 2-core CPU.
+
+The three rows:
+
+- spot: ``lenses/cmount_4p.json`` (shipped), its network trained by ``lensopt train-irm``;
+- raw: ``lenses/cmount_4p_raw.json`` (shipped), its network trained by ``lensopt train-irm``;
+- restored: ``lensopt optimize`` of a copy of ``specs/cmount_4p_restored.toml`` (joint LM lens step +
+  Adam network step from the spot lens), at the small batch, patch and step count given here.
+
+Fair comparison: the two ``train-irm`` networks get the same number of Adam steps, batch, patch, PSF
+size, fields, pupil sampling, PSF grid, noise, learning rate and schedule as the joint run's network.
+The spot lens JSON carries no ``rgb_weights``; its copy here gets the restored spec's (the spectrum's
+R/G/B split, which does not touch the geometry) so that all three networks restore 3-channel images.
+
+Evaluation: ``lensopt evaluate LENS --irm CKPT --noise 0.005 --json`` (before and after restoration) on
+held-out dead-leaves scenes of a seed used by no training source, and on the colour photographs
+bundled with scikit-image; ESR from ``lensopt trace LENS --json`` (rings:24).
+
+    PYTHONPATH=. python benchmarks/table_s15.py --steps 300 --batch 4 --patch 64
+    # → out/table_s15/ (lenses, checkpoints, logs) and benchmarks/results_table_s15.json
+
+The restored run and the two ``train-irm`` runs go as two processes side by side (``--parallel 2``,
+one thread each). ``--evaluate-only`` re-scores the outputs of an earlier run in the same ``--work``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+PHOTOS = ["astronaut.png", "chelsea.png", "coffee.png", "rocket.jpg", "motorcycle_left.png",
+          "hubble_deep_field.jpg", "ihc.png", "retina.jpg"]
+EVAL_SEED = 424242  # dead-leaves seed of the held-out scenes: training uses seeds 0 and 1 000 003
+
+
+def _python() -> list[str]:
+    return [sys.executable, "-m", "lensopt"]
+
+
+def write_inputs(work: Path, a: argparse.Namespace) -> dict[str, Path]:
+    """The three start files in ``work``: spot and raw lenses with the restored spec's RGB split and
+    ``[restore]`` section, and the restored spec at this budget."""
+    sys.path.insert(0, str(ROOT))
+    from lensopt.spec import load_spec
+
+    restored = load_spec(ROOT / "specs/cmount_4p_restored.toml")
+    img = restored.optimize.image.model_copy(update={"batch": a.batch, "patch": a.patch, "psf_size": a.psf_size,
+                                                     "validation": a.val_patches})
+    train = restored.restore.train.model_copy(update={
+        "steps": a.steps, "batch": a.batch, "patch": a.patch, "validation_patches": a.val_patches,
+        "checkpoint_every": a.checkpoint_every, "validate_every": a.validate_every})
+    rest = restored.restore.model_copy(update={"train": train})
+    opt = restored.optimize.model_copy(update={"image": img, "steps": a.steps})
+    out = {}
+    spec = restored.model_copy(update={"optimize": opt, "restore": rest})
+    out["restored_start"] = work / "cmount_4p_restored_start.json"
+    out["restored_start"].write_text(spec.model_dump_json(indent=1, exclude_none=True))
+    for name, path in (("spot", "lenses/cmount_4p.json"), ("raw", "lenses/cmount_4p_raw.json")):
+        lens = load_spec(ROOT / path)
+        spectrum = lens.spectrum.model_copy(update={"rgb_weights": restored.spectrum.rgb_weights})
+        lens = lens.model_copy(update={"spectrum": spectrum, "restore": rest})
+        out[name] = work / f"{name}.json"
+        out[name].write_text(lens.model_dump_json(indent=1, exclude_none=True))
+    return out
+
+
+def _run(cmd: list[str], log: Path) -> subprocess.Popen:
+    env = dict(os.environ, OMP_NUM_THREADS=str(1), PYTHONPATH=str(ROOT))
+    print("$ " + " ".join(cmd), flush=True)
+    return subprocess.Popen(cmd, stdout=log.open("w"), stderr=subprocess.STDOUT, env=env, cwd=ROOT)
+
+
+def _wait(procs: list[tuple[str, subprocess.Popen, float]], times: dict[str, float]) -> None:
+    for name, p, t0 in procs:
+        rc = p.wait()
+        times[name] = time.perf_counter() - t0
+        if rc != 0:
+            raise SystemExit(f"{name} failed (exit {rc}); see its log in the work folder")
+
+
+def train(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str, float]:
+    """The joint run and the two train-irm runs; wall seconds of each."""
+    irm_opts = ["--steps", str(a.steps), "--batch", str(a.batch), "--patch", str(a.patch),
+                "--psf-size", str(a.psf_size), "--fields", "9", "--sampling", "rings:8", "--grid", "3x3",
+                "--checkpoint-every", str(a.checkpoint_every), "--validate-every", str(a.validate_every),
+                "--val-patches", str(a.val_patches)]
+    jobs = {
+        "restored": _python() + ["optimize", str(files["restored_start"]), "-o", str(work / "restored.json"),
+                                 "--checkpoint", str(work / "ck_restored"), "--log-dir", str(work / "tb_restored")],
+        "spot": _python() + ["train-irm", str(files["spot"]), "-o", str(work / "ck_spot"),
+                             "--log-dir", str(work / "tb_spot")] + irm_opts,
+        "raw": _python() + ["train-irm", str(files["raw"]), "-o", str(work / "ck_raw"),
+                            "--log-dir", str(work / "tb_raw")] + irm_opts,
+    }
+    for name in jobs:
+        for p in (work / f"ck_{name}", work / f"tb_{name}"):
+            shutil.rmtree(p, ignore_errors=True)
+    times: dict[str, float] = {}
+    if a.parallel >= 2:
+        # The joint step costs about two network steps: the joint run beside spot-then-raw.
+        t0 = time.perf_counter()
+        pr = _run(jobs["restored"], work / "restored.log")
+        ps = _run(jobs["spot"], work / "spot.log")
+        ts = time.perf_counter()
+        rc = ps.wait()
+        times["spot"] = time.perf_counter() - ts
+        if rc != 0:
+            raise SystemExit("spot train-irm failed; see spot.log")
+        tr = time.perf_counter()
+        _wait([("raw", _run(jobs["raw"], work / "raw.log"), tr), ("restored", pr, t0)], times)
+    else:
+        for name, cmd in jobs.items():
+            _wait([(name, _run(cmd, work / f"{name}.log"), time.perf_counter())], times)
+    return times
+
+
+def _json_out(cmd: list[str]) -> dict[str, Any]:
+    env = dict(os.environ, OMP_NUM_THREADS=str(1), PYTHONPATH=str(ROOT))
+    print("$ " + " ".join(cmd), flush=True)
+    r = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT)
+    if r.returncode != 0:
+        raise SystemExit(f"failed: {' '.join(cmd)}\n{r.stderr[-2000:]}")
+    return json.loads(r.stdout)
+
+
+def _brief(e: dict[str, Any]) -> dict[str, Any]:
+    return {"psnr_db": e["psnr_db"], "ssim": e["ssim"], "count": e["count"], "images": e["images"],
+            "rings_psnr_db": [g["psnr_db"] for g in e["rings"]]}
+
+
+def evaluate(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str, Any]:
+    import skimage
+
+    photos = work / "photos"
+    photos.mkdir(exist_ok=True)
+    for name in PHOTOS:
+        shutil.copy(Path(skimage.__file__).parent / "data" / name, photos / name)
+    rows: dict[str, Any] = {}
+    for name, lens, ck in (("spot", files["spot"], "ck_spot"), ("raw", files["raw"], "ck_raw"),
+                           ("restored", work / "restored.json", "ck_restored")):
+        row: dict[str, Any] = {"lens": str(lens.relative_to(ROOT) if lens.is_relative_to(ROOT) else lens)}
+        tr = _json_out(_python() + ["trace", str(lens), "--json"])
+        row["esr_um"] = tr["effective_spot_radius_um"]
+        for key, extra in (("dead_leaves", ["--count", str(a.eval_count), "--seed", str(EVAL_SEED)]),
+                           ("photos", ["--images", str(photos), "--count", "8", "--seed", "0"])):
+            e = _json_out(_python() + ["evaluate", str(lens), "--irm", str(work / ck), "--noise", "0.005",
+                                       "--json"] + extra)
+            row[key] = {"before": _brief(e), "after": _brief(e["after_restoration"]),
+                        "gain_db": e["after_restoration"]["psnr_db"] - e["psnr_db"]}
+        rows[name] = row
+    return rows
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--steps", type=int, default=300, help="network Adam steps (and joint steps) per row")
+    p.add_argument("--batch", type=int, default=4)
+    p.add_argument("--patch", type=int, default=64)
+    p.add_argument("--psf-size", type=int, default=49, help="as specs/cmount_4p_restored.toml")
+    p.add_argument("--val-patches", type=int, default=8)
+    p.add_argument("--validate-every", type=int, default=50)
+    p.add_argument("--checkpoint-every", type=int, default=25)
+    p.add_argument("--eval-count", type=int, default=50, help="held-out dead-leaves scenes")
+    p.add_argument("--parallel", type=int, default=2, choices=(1, 2))
+    p.add_argument("--work", type=Path, default=ROOT / "out" / "table_s15")
+    p.add_argument("--evaluate-only", action="store_true")
+    p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results_table_s15.json")
+    a = p.parse_args()
+    a.work.mkdir(parents=True, exist_ok=True)
+    files = write_inputs(a.work, a)
+    t0 = time.perf_counter()
+    times = {} if a.evaluate_only else train(a.work, files, a)
+    t_train = time.perf_counter() - t0
+    rows = evaluate(a.work, files, a)
+    cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
+    result = {
+        "budget": {"steps": a.steps, "batch": a.batch, "patch": a.patch, "psf_size": a.psf_size, "fields": 9,
+                   "sampling": "rings:8", "grid": [3, 3], "noise": 0.005, "val_patches": a.val_patches,
+                   "parallel": a.parallel, "threads_per_process": 1},
+        "train_wall_s": times, "train_total_wall_s": t_train if times else None,
+        "children_cpu_s": cpu.ru_utime + cpu.ru_stime, "load_avg_at_end": os.getloadavg(),
+        "evaluation": {"noise": 0.005, "dead_leaves_seed": EVAL_SEED, "dead_leaves_count": a.eval_count,
+                       "photos": PHOTOS},
+        "rows": rows,
+    }
+    from lensopt.io.checkpoint import load_checkpoint
+
+    for name in ("restored", "spot", "raw"):
+        ck = load_checkpoint(a.work / f"ck_{name}")
+        result.setdefault("histories", {})[name] = {"step": ck.step, "history": ck.meta.get("history")}
+    tmp = a.out.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(result, indent=1) + "\n")
+    os.replace(tmp, a.out)
+    print("| lens | ESR µm | dead leaves before → after (gain) | photos before → after (gain) |")
+    print("|---|---:|---|---|")
+    for name, r in rows.items():
+        d, f = r["dead_leaves"], r["photos"]
+        print(f"| {name} | {r['esr_um']:.2f} | {d['before']['psnr_db']:.2f} → {d['after']['psnr_db']:.2f} "
+              f"({d['gain_db']:+.2f}) | {f['before']['psnr_db']:.2f} → {f['after']['psnr_db']:.2f} "
+              f"({f['gain_db']:+.2f}) |")
+
+
+if __name__ == "__main__":
+    main()
