@@ -138,6 +138,47 @@ def _brief(e: dict[str, Any]) -> dict[str, Any]:
             "rings_psnr_db": [g["psnr_db"] for g in e["rings"]]}
 
 
+def requirements(lens: Path) -> dict[str, Any]:
+    """The S6.1 requirements measured on every ray of a dense pupil grid plus the rim (as
+    tests/test_lenses.py does for the shipped C-mount lenses): glass 1–5 mm, air ≥ 0.25 mm, image
+    clearance ≥ 20 mm, angles ≤ 60°, |distortion| ≤ 2 %, EFL 28 mm, f/2."""
+    import math
+
+    import torch
+
+    from lensopt.analysis.report import trace_report
+    from lensopt.optics.bundle import trace_bundle
+    from lensopt.optics.sampling import PupilSampling
+    from lensopt.spec import build, load_spec
+
+    model = build(load_spec(lens))
+    rep = trace_report(model, PupilSampling.parse("rings:24"))
+    grid = PupilSampling.parse("grid:41").points(dtype=torch.float64)
+    phi = torch.linspace(0, 2 * math.pi, 65, dtype=torch.float64)[:-1]
+    b = trace_bundle(model.lens, model.system, torch.cat([grid, torch.stack([phi.cos(), phi.sin()], -1)]),
+                     record=True)
+    z = [h.pos[..., 2] for h in b.result.hits] + [b.result.pos[..., 2]]
+    glass, air, image = [], [], None
+    for i, surf in enumerate(model.spec.surfaces):
+        tz = z[i + 1] - z[i]
+        if i == len(model.spec.surfaces) - 1:
+            image = float(tz.min())
+        elif surf.material == "air":
+            air.append(float(tz.min()))
+        else:
+            glass += [float(tz.min()), float(tz.max())]
+    cos2 = torch.stack([torch.stack([h.cos2_in, h.cos2_out]) for h in b.result.hits])
+    out = {"all_rays_valid": bool(b.result.valid.all()), "glass_min_mm": min(glass), "glass_max_mm": max(glass),
+           "air_min_mm": min(air), "image_clearance_mm": image,
+           "max_angle_deg": math.degrees(math.acos(math.sqrt(float(cos2.min())))),
+           "max_abs_distortion_percent": max(abs(f["distortion_percent"]) for f in rep["fields"]),
+           "efl_mm": rep["first_order"]["efl"], "fnumber": rep["first_order"]["fnumber"]}
+    out["met"] = (out["all_rays_valid"] and out["glass_min_mm"] >= 1.0 and out["glass_max_mm"] <= 5.0
+                  and out["air_min_mm"] >= 0.25 and image >= 20.0 and out["max_angle_deg"] <= 60.0
+                  and out["max_abs_distortion_percent"] <= 2.0 and abs(out["efl_mm"] / 28.0 - 1) <= 1e-3)
+    return out
+
+
 def evaluate(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str, Any]:
     import skimage
 
@@ -151,6 +192,7 @@ def evaluate(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[
         row: dict[str, Any] = {"lens": str(lens.relative_to(ROOT) if lens.is_relative_to(ROOT) else lens)}
         tr = _json_out(_python() + ["trace", str(lens), "--json"])
         row["esr_um"] = tr["effective_spot_radius_um"]
+        row["requirements"] = requirements(lens)
         for key, extra in (("dead_leaves", ["--count", str(a.eval_count), "--seed", str(EVAL_SEED)]),
                            ("photos", ["--images", str(photos), "--count", "8", "--seed", "0"])):
             e = _json_out(_python() + ["evaluate", str(lens), "--irm", str(work / ck), "--noise", "0.005",
