@@ -135,7 +135,18 @@ def _json_out(cmd: list[str]) -> dict[str, Any]:
 
 def _brief(e: dict[str, Any]) -> dict[str, Any]:
     return {"psnr_db": e["psnr_db"], "ssim": e["ssim"], "count": e["count"], "images": e["images"],
-            "rings_psnr_db": [g["psnr_db"] for g in e["rings"]]}
+            "rings_psnr_db": [g["psnr_db"] for g in e["rings"]], "space": e["space"],
+            "items_psnr_db": [i["psnr_db"] for i in e["items"]], "items_ssim": [i["ssim"] for i in e["items"]]}
+
+
+def paired(rows: dict[str, Any], key: str, when: str, a: str, b: str) -> dict[str, float]:
+    """Mean per-scene PSNR difference b − a (same scenes, same sensor tiles, same noise) and its
+    standard error over the scenes."""
+    import statistics
+
+    d = [y - x for x, y in zip(rows[a][key][when]["items_psnr_db"], rows[b][key][when]["items_psnr_db"], strict=True)]
+    se = statistics.stdev(d) / len(d) ** 0.5 if len(d) > 1 else float("nan")
+    return {"mean_db": statistics.fmean(d), "stderr_db": se, "scenes": len(d), "wins": sum(x > 0 for x in d)}
 
 
 def requirements(lens: Path) -> dict[str, Any]:
@@ -234,6 +245,9 @@ def main() -> None:
         "evaluation": {"noise": 0.005, "dead_leaves_seed": EVAL_SEED, "dead_leaves_count": a.eval_count,
                        "photos": PHOTOS},
         "rows": rows,
+        "paired_differences": {f"{key}/{when}/{b}-{a}": paired(rows, key, when, a, b)
+                               for key in ("dead_leaves", "photos") for when in ("before", "after")
+                               for a, b in (("spot", "raw"), ("raw", "restored"), ("spot", "restored"))},
     }
     from lensopt.io.checkpoint import load_checkpoint
 
