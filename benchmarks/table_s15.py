@@ -22,6 +22,8 @@ bundled with scikit-image; ESR from ``lensopt trace LENS --json`` (rings:24).
 
 The restored run and the two ``train-irm`` runs go as two processes side by side (``--parallel 2``,
 one thread each). ``--evaluate-only`` re-scores the outputs of an earlier run in the same ``--work``.
+``--control`` adds a fourth row: the restored lens with a fresh ``train-irm`` network of the same
+budget (is the gain the lens's or the joint training's?).
 """
 
 from __future__ import annotations
@@ -88,12 +90,17 @@ def _wait(procs: list[tuple[str, subprocess.Popen, float]], times: dict[str, flo
             raise SystemExit(f"{name} failed (exit {rc}); see its log in the work folder")
 
 
+def _irm_opts(a: argparse.Namespace) -> list[str]:
+    """train-irm options that give the network the joint run's budget and rendering."""
+    return ["--steps", str(a.steps), "--batch", str(a.batch), "--patch", str(a.patch),
+            "--psf-size", str(a.psf_size), "--fields", "9", "--sampling", "rings:8", "--grid", "3x3",
+            "--checkpoint-every", str(a.checkpoint_every), "--validate-every", str(a.validate_every),
+            "--val-patches", str(a.val_patches)]
+
+
 def train(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str, float]:
     """The joint run and the two train-irm runs; wall seconds of each."""
-    irm_opts = ["--steps", str(a.steps), "--batch", str(a.batch), "--patch", str(a.patch),
-                "--psf-size", str(a.psf_size), "--fields", "9", "--sampling", "rings:8", "--grid", "3x3",
-                "--checkpoint-every", str(a.checkpoint_every), "--validate-every", str(a.validate_every),
-                "--val-patches", str(a.val_patches)]
+    irm_opts = _irm_opts(a)
     jobs = {
         "restored": _python() + ["optimize", str(files["restored_start"]), "-o", str(work / "restored.json"),
                                  "--checkpoint", str(work / "ck_restored"), "--log-dir", str(work / "tb_restored")],
@@ -122,6 +129,19 @@ def train(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str
         for name, cmd in jobs.items():
             _wait([(name, _run(cmd, work / f"{name}.log"), time.perf_counter())], times)
     return times
+
+
+def train_control(work: Path, a: argparse.Namespace) -> float:
+    """A fourth row: a fresh network trained by train-irm (same budget) for the lens the joint run wrote,
+    to tell the lens's share of the restored row's gain from the joint training's."""
+    lens = work / "restored.json"
+    cmd = _python() + ["train-irm", str(lens), "-o", str(work / "ck_restored_irm"), "--log-dir",
+                       str(work / "tb_restored_irm")] + _irm_opts(a)
+    for p in (work / "ck_restored_irm", work / "tb_restored_irm"):
+        shutil.rmtree(p, ignore_errors=True)
+    times: dict[str, float] = {}
+    _wait([("restored_irm", _run(cmd, work / "restored_irm.log"), time.perf_counter())], times)
+    return times["restored_irm"]
 
 
 def _json_out(cmd: list[str]) -> dict[str, Any]:
@@ -198,8 +218,11 @@ def evaluate(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[
     for name in PHOTOS:
         shutil.copy(Path(skimage.__file__).parent / "data" / name, photos / name)
     rows: dict[str, Any] = {}
-    for name, lens, ck in (("spot", files["spot"], "ck_spot"), ("raw", files["raw"], "ck_raw"),
-                           ("restored", work / "restored.json", "ck_restored")):
+    todo = [("spot", files["spot"], "ck_spot"), ("raw", files["raw"], "ck_raw"),
+            ("restored", work / "restored.json", "ck_restored")]
+    if (work / "ck_restored_irm").exists():
+        todo.append(("restored_lens_irm", work / "restored.json", "ck_restored_irm"))
+    for name, lens, ck in todo:
         row: dict[str, Any] = {"lens": str(lens.relative_to(ROOT) if lens.is_relative_to(ROOT) else lens)}
         tr = _json_out(_python() + ["trace", str(lens), "--json"])
         row["esr_um"] = tr["effective_spot_radius_um"]
@@ -226,7 +249,9 @@ def main() -> None:
     p.add_argument("--eval-count", type=int, default=50, help="held-out dead-leaves scenes")
     p.add_argument("--parallel", type=int, default=2, choices=(1, 2))
     p.add_argument("--work", type=Path, default=ROOT / "out" / "table_s15")
-    p.add_argument("--evaluate-only", action="store_true")
+    p.add_argument("--evaluate-only", action="store_true", help="skip the three training runs")
+    p.add_argument("--control", action="store_true",
+                   help="also train a fresh train-irm network for the restored lens (a fourth row)")
     p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results_table_s15.json")
     a = p.parse_args()
     a.work.mkdir(parents=True, exist_ok=True)
@@ -234,6 +259,8 @@ def main() -> None:
     t0 = time.perf_counter()
     times = {} if a.evaluate_only else train(a.work, files, a)
     t_train = time.perf_counter() - t0
+    if a.control:
+        times["restored_irm"] = train_control(a.work, a)
     rows = evaluate(a.work, files, a)
     cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
     result = {
@@ -245,15 +272,23 @@ def main() -> None:
         "evaluation": {"noise": 0.005, "dead_leaves_seed": EVAL_SEED, "dead_leaves_count": a.eval_count,
                        "photos": PHOTOS},
         "rows": rows,
-        "paired_differences": {f"{key}/{when}/{b}-{a}": paired(rows, key, when, a, b)
+        "paired_differences": {f"{key}/{when}/{y}-{x}": paired(rows, key, when, x, y)
                                for key in ("dead_leaves", "photos") for when in ("before", "after")
-                               for a, b in (("spot", "raw"), ("raw", "restored"), ("spot", "restored"))},
+                               for x, y in (("spot", "raw"), ("raw", "restored"), ("spot", "restored"),
+                                            ("spot", "restored_lens_irm"), ("restored_lens_irm", "restored"))
+                               if x in rows and y in rows},
     }
     from lensopt.io.checkpoint import load_checkpoint
 
-    for name in ("restored", "spot", "raw"):
+    for name in ("restored", "spot", "raw", "restored_irm"):
+        if not (a.work / f"ck_{name}").exists():
+            continue
         ck = load_checkpoint(a.work / f"ck_{name}")
-        result.setdefault("histories", {})[name] = {"step": ck.step, "history": ck.meta.get("history")}
+        hist = ck.meta.get("history") or []
+        result.setdefault("histories", {})[name] = {
+            "step": ck.step, "sum_step_wall_s": sum(h.get("wall_s", 0.0) for h in hist),
+            "validation": [{k: h[k] for k in ("step", "psnr_raw", "psnr_restored") if k in h}
+                           for h in hist if "psnr_restored" in h], "history": hist}
     tmp = a.out.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(result, indent=1) + "\n")
     os.replace(tmp, a.out)
