@@ -21,7 +21,7 @@ bundled with scikit-image; ESR from ``lensopt trace LENS --json`` (rings:24).
     # → out/table_s15/ (lenses, checkpoints, logs) and benchmarks/results_table_s15.json
 
 The restored run and the two ``train-irm`` runs go as two processes side by side (``--parallel 2``,
-one thread each). ``--evaluate-only`` re-scores the outputs of an earlier run in the same ``--work``.
+one thread each). ``--skip-main`` re-uses the three main runs of an earlier call in the same ``--work``.
 ``--control`` adds a fourth row: the restored lens with a fresh ``train-irm`` network of the same
 budget (is the gain the lens's or the joint training's?).
 """
@@ -131,6 +131,21 @@ def train(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str
     return times
 
 
+def train_extra_seeds(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str, float]:
+    """Networks for the spot and raw lenses again with other seeds (initial weights, scenes, tiles, noise
+    and the train-irm validation patches): how much of a row's score is the draw of one training run."""
+    times: dict[str, float] = {}
+    for seed in a.extra_seeds:
+        for name in ("spot", "raw"):
+            tag = f"{name}_seed{seed}"
+            cmd = _python() + ["train-irm", str(files[name]), "-o", str(work / f"ck_{tag}"), "--log-dir",
+                               str(work / f"tb_{tag}"), "--seed", str(seed)] + _irm_opts(a)
+            for p in (work / f"ck_{tag}", work / f"tb_{tag}"):
+                shutil.rmtree(p, ignore_errors=True)
+            _wait([(tag, _run(cmd, work / f"{tag}.log"), time.perf_counter())], times)
+    return times
+
+
 def train_control(work: Path, a: argparse.Namespace) -> float:
     """A fourth row: a fresh network trained by train-irm (same budget) for the lens the joint run wrote,
     to tell the lens's share of the restored row's gain from the joint training's."""
@@ -222,6 +237,10 @@ def evaluate(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[
             ("restored", work / "restored.json", "ck_restored")]
     if (work / "ck_restored_irm").exists():
         todo.append(("restored_lens_irm", work / "restored.json", "ck_restored_irm"))
+    for seed in a.extra_seeds:
+        for name in ("spot", "raw"):
+            if (work / f"ck_{name}_seed{seed}").exists():
+                todo.append((f"{name}_seed{seed}", files[name], f"ck_{name}_seed{seed}"))
     for name, lens, ck in todo:
         row: dict[str, Any] = {"lens": str(lens.relative_to(ROOT) if lens.is_relative_to(ROOT) else lens)}
         tr = _json_out(_python() + ["trace", str(lens), "--json"])
@@ -249,7 +268,11 @@ def main() -> None:
     p.add_argument("--eval-count", type=int, default=50, help="held-out dead-leaves scenes")
     p.add_argument("--parallel", type=int, default=2, choices=(1, 2))
     p.add_argument("--work", type=Path, default=ROOT / "out" / "table_s15")
-    p.add_argument("--evaluate-only", action="store_true", help="skip the three training runs")
+    p.add_argument("--skip-main", action="store_true",
+                   help="skip the three main training runs (use those in --work)")
+    p.add_argument("--no-evaluate", action="store_true", help="train only")
+    p.add_argument("--extra-seeds", type=int, nargs="*", default=[],
+                   help="also train the spot and raw networks with these seeds (more rows)")
     p.add_argument("--control", action="store_true",
                    help="also train a fresh train-irm network for the restored lens (a fourth row)")
     p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results_table_s15.json")
@@ -257,17 +280,20 @@ def main() -> None:
     a.work.mkdir(parents=True, exist_ok=True)
     files = write_inputs(a.work, a)
     t0 = time.perf_counter()
-    times = {} if a.evaluate_only else train(a.work, files, a)
+    times = {} if a.skip_main else train(a.work, files, a)
     t_train = time.perf_counter() - t0
     if a.control:
         times["restored_irm"] = train_control(a.work, a)
+    times.update(train_extra_seeds(a.work, files, a))
+    if a.no_evaluate:
+        return
     rows = evaluate(a.work, files, a)
     cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
     result = {
         "budget": {"steps": a.steps, "batch": a.batch, "patch": a.patch, "psf_size": a.psf_size, "fields": 9,
                    "sampling": "rings:8", "grid": [3, 3], "noise": 0.005, "val_patches": a.val_patches,
                    "parallel": a.parallel, "threads_per_process": 1},
-        "train_wall_s": times, "train_total_wall_s": t_train if times else None,
+        "train_wall_s": times, "train_total_wall_s": t_train if not a.skip_main else None,
         "children_cpu_s": cpu.ru_utime + cpu.ru_stime, "load_avg_at_end": os.getloadavg(),
         "evaluation": {"noise": 0.005, "dead_leaves_seed": EVAL_SEED, "dead_leaves_count": a.eval_count,
                        "photos": PHOTOS},
@@ -276,11 +302,13 @@ def main() -> None:
                                for key in ("dead_leaves", "photos") for when in ("before", "after")
                                for x, y in (("spot", "raw"), ("raw", "restored"), ("spot", "restored"),
                                             ("spot", "restored_lens_irm"), ("restored_lens_irm", "restored"))
+                                 + tuple((n, f"{n}_seed{s}") for s in a.extra_seeds for n in ("spot", "raw"))
                                if x in rows and y in rows},
     }
     from lensopt.io.checkpoint import load_checkpoint
 
-    for name in ("restored", "spot", "raw", "restored_irm"):
+    for name in ["restored", "spot", "raw", "restored_irm"] + [f"{n}_seed{s}" for s in a.extra_seeds
+                                                                for n in ("spot", "raw")]:
         if not (a.work / f"ck_{name}").exists():
             continue
         ck = load_checkpoint(a.work / f"ck_{name}")
