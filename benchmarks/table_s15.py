@@ -21,7 +21,8 @@ bundled with scikit-image; ESR from ``lensopt trace LENS --json`` (rings:24).
     # → out/table_s15/ (lenses, checkpoints, logs) and benchmarks/results_table_s15.json
 
 The restored run and the two ``train-irm`` runs go as two processes side by side (``--parallel 2``,
-one thread each). ``--skip-main`` re-uses the three main runs of an earlier call in the same ``--work``.
+one thread each). ``--skip-main`` re-uses the three main runs of an earlier call in the same ``--work`` (the extra and
+control runs are re-used whenever their checkpoint has reached ``--steps``).
 ``--control`` adds a fourth row: the restored lens with a fresh ``train-irm`` network of the same
 budget (is the gain the lens's or the joint training's?).
 """
@@ -131,6 +132,13 @@ def train(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str
     return times
 
 
+def _finished(ck: Path, steps: int) -> bool:
+    """A checkpoint of a finished run (re-used, not trained again)."""
+    from lensopt.io.checkpoint import load_checkpoint
+
+    return ck.exists() and load_checkpoint(ck).step == steps
+
+
 def train_extra_seeds(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str, float]:
     """Networks for the spot and raw lenses again with other seeds (initial weights, scenes, tiles, noise
     and the train-irm validation patches): how much of a row's score is the draw of one training run."""
@@ -138,6 +146,8 @@ def train_extra_seeds(work: Path, files: dict[str, Path], a: argparse.Namespace)
     for seed in a.extra_seeds:
         for name in ("spot", "raw"):
             tag = f"{name}_seed{seed}"
+            if _finished(work / f"ck_{tag}", a.steps):
+                continue
             cmd = _python() + ["train-irm", str(files[name]), "-o", str(work / f"ck_{tag}"), "--log-dir",
                                str(work / f"tb_{tag}"), "--seed", str(seed)] + _irm_opts(a)
             for p in (work / f"ck_{tag}", work / f"tb_{tag}"):
@@ -150,6 +160,8 @@ def train_control(work: Path, a: argparse.Namespace) -> float:
     """A fourth row: a fresh network trained by train-irm (same budget) for the lens the joint run wrote,
     to tell the lens's share of the restored row's gain from the joint training's."""
     lens = work / "restored.json"
+    if _finished(work / "ck_restored_irm", a.steps):
+        return 0.0
     cmd = _python() + ["train-irm", str(lens), "-o", str(work / "ck_restored_irm"), "--log-dir",
                        str(work / "tb_restored_irm")] + _irm_opts(a)
     for p in (work / "ck_restored_irm", work / "tb_restored_irm"):
