@@ -16,7 +16,7 @@ from pathlib import Path
 
 import torch
 
-from lensopt.optim import Problem
+from lensopt.design import build_problem
 from lensopt.optim import residuals as res
 from lensopt.optim.lm import damped_step
 from lensopt.spec import load_spec
@@ -41,7 +41,7 @@ def main() -> None:
           "solve, all rows s | solve, active rows s | rows active / all | max |Δstep| / max |step| |")
     print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     for name in ("cooke_triplet_opt.toml", "cmount_4p.toml"):
-        p = Problem(load_spec(SPECS / name))
+        p = build_problem(load_spec(SPECS / name))
         th = p.theta0
         tracing = res._tracing
         t = {"walk": [], "skip": [], "full": [], "pruned": []}

@@ -1,5 +1,5 @@
 """Where the time of `lensopt optimize specs/cmount_4p.toml` goes (issue 14): the same library call as
-the CLI (``optim.run.optimize``, steps and schedule as in the spec, seed 0), with timers around the
+the CLI (``design.optimize``, steps and schedule as in the spec, seed 0), with timers around the
 Jacobian (``Problem.jacobian`` or the compiled one, its one-off capture + compile apart), the trial
 residual evaluations (``Problem.evaluate``) and the damped least-squares solve (``lm.damped_step``).
 
@@ -18,8 +18,9 @@ from collections import defaultdict
 from pathlib import Path
 
 from lensopt.analysis.report import trace_report
+from lensopt.design import optimize
 from lensopt.optics.sampling import PupilSampling
-from lensopt.optim import compiled_jacobian, lm, problem, run
+from lensopt.optim import compiled_jacobian, lm, problem
 from lensopt.spec import build, load_spec
 
 SPEC = Path(__file__).resolve().parents[1] / "specs" / "cmount_4p.toml"
@@ -52,7 +53,7 @@ def main() -> None:
     cj.__call__ = timed("Jacobian (compiled, including its one-off build)", cj.__call__)
     load = os.getloadavg()
     t0 = time.perf_counter()
-    res = run.optimize(load_spec(args.spec), steps=args.steps, seed=0, jacobian=args.jacobian)
+    res = optimize(load_spec(args.spec), steps=args.steps, seed=0, jacobian=args.jacobian)
     wall = time.perf_counter() - t0
     # The ESR the CLI reports (rings:24 over the spec's fields and wavelengths), start and final lens.
     sampling = PupilSampling.parse("rings:24", seed=0)

@@ -27,7 +27,7 @@ def main() -> None:
     from lensopt_before.optim import Problem as OldProblem
     from lensopt_before.spec import load_spec as old_load_spec
 
-    from lensopt.optim import Problem
+    from lensopt.design import build_problem
     from lensopt.spec import load_spec
 
     print(f"load {os.getloadavg()[0]:.1f}, {torch.get_num_threads()} thread(s); medians of {args.repeats} "
@@ -35,7 +35,7 @@ def main() -> None:
     print("| problem | J and ℓ equal bit for bit | Jacobian now s | before s | before / now |\n"
           "| --- | --- | ---: | ---: | ---: |")
     for name in ("cooke_triplet_opt", "cmount_4p"):
-        new, old = Problem(load_spec(SPECS / f"{name}.toml")), OldProblem(old_load_spec(SPECS / f"{name}.toml"))
+        new, old = build_problem(load_spec(SPECS / f"{name}.toml")), OldProblem(old_load_spec(SPECS / f"{name}.toml"))
         theta = new.theta0
         (jn, rn), (jo, ro) = new.jacobian(theta), old.jacobian(theta)
         same = torch.equal(jn, jo) and torch.equal(rn, ro)

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import torch
 
-from lensopt.optim import Problem
+from lensopt.design import build_problem
 from lensopt.spec import load_spec
 
 SPECS = Path(__file__).resolve().parents[1] / "specs"
@@ -45,7 +45,7 @@ def _time(fn, repeats: int) -> tuple[float, torch.Tensor]:  # noqa: ANN001
 
 
 def bench(spec_name: str, repeats: int, jacrev_max_rows: int, compiled: bool = False, fd: bool = True) -> dict:
-    p = Problem(load_spec(SPECS / spec_name))
+    p = build_problem(load_spec(SPECS / spec_name))
     theta = p.theta0
     N, M = p.num_variables, p.size
     h = 1e-6

@@ -25,10 +25,10 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from procmem import peak_rss_mb, vm_kb  # noqa: E402
 
+from lensopt.design import build_problem  # noqa: E402
 from lensopt.optim.irm import make_optimizer, network_step  # noqa: E402
 from lensopt.optim.joint import RestoredObjective, joint_step  # noqa: E402
 from lensopt.optim.lm import LevenbergMarquardt, Trial, damped_step  # noqa: E402
-from lensopt.optim.problem import Problem  # noqa: E402
 from lensopt.restore import ConditionedRestorer, RestoreConfig  # noqa: E402
 from lensopt.restore.config import TrainConfig  # noqa: E402
 from lensopt.spec import parse_spec  # noqa: E402
@@ -70,10 +70,10 @@ def main() -> None:
                         "image": {"patch": a.patch, "batch": a.batch, "psf_size": a.psf_size, "fields": a.fields,
                                   "sampling": a.sampling}}
     spec = parse_spec(data)
-    problem = Problem(spec, method="lm")
+    problem = build_problem(spec, method="lm")
     torch.manual_seed(0)
     net = ConditionedRestorer(RestoreConfig())
-    obj = RestoredObjective(problem.spec, problem.system, spec.optimize.image, net)
+    obj = RestoredObjective(problem.setup.camera, problem.opt.image, net)
     problem.image = obj
     cfg = TrainConfig()
     adam = make_optimizer(net, cfg)

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import torch
 
+from lensopt.design import build_problem
 from lensopt.optics.backend import set_backend
 from lensopt.optim import Problem
 from lensopt.optim.run import make_optimizer
@@ -41,11 +42,11 @@ SPECS = Path(__file__).resolve().parents[1] / "specs"
 
 def problem(name: str) -> Problem:
     if name == "cooke":
-        return Problem(load_spec(SPECS / "cooke_triplet_opt.toml"))
+        return build_problem(load_spec(SPECS / "cooke_triplet_opt.toml"))
     spec = load_spec(SPECS / "cmount_4p.toml")
     for s in spec.surfaces:
         s.vary = [v for v in s.vary if v != "material"]
-    return Problem(spec)
+    return build_problem(spec)
 
 
 def run(p: Problem, method: str, budget_s: float, lr: float | None = None,

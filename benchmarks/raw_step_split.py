@@ -16,8 +16,8 @@ from pathlib import Path
 
 import torch
 
+from lensopt.design import build_problem
 from lensopt.imaging.render import mse
-from lensopt.optim import Problem
 from lensopt.optim.lm import damped_step
 from lensopt.spec import load_spec
 
@@ -28,7 +28,7 @@ def split(batch: int, patch: int, repeat: int) -> dict[str, float]:
     spec = load_spec(ROOT / "specs" / "cmount_4p_raw.toml")
     image = spec.optimize.image.model_copy(update={"batch": batch, "patch": patch})
     spec.optimize = spec.optimize.model_copy(update={"image": image})
-    p = Problem(spec, seed=0)
+    p = build_problem(spec, seed=0)
     img = p.image
     theta = p.theta0
     best: dict[str, float] = {}

@@ -15,8 +15,8 @@ import time
 from pathlib import Path
 
 from lensopt.analysis.report import trace_report
+from lensopt.design import build_problem, optimize
 from lensopt.optics.sampling import PupilSampling
-from lensopt.optim import Problem, optimize
 from lensopt.optim.report import constraint_report
 from lensopt.spec import build, load_spec, save_json
 
@@ -44,7 +44,7 @@ def main() -> None:
     wall = time.perf_counter() - t0
     save_json(result.spec, Path(args.out))
     sampling = PupilSampling.parse("rings:24", seed=0)
-    final = Problem(result.spec, seed=0)
+    final = build_problem(result.spec, seed=0)
     cons = constraint_report(final, final.theta0, sampling)
     record = {
         "spec": os.path.relpath(args.spec, ROOT), "output": os.path.relpath(args.out, ROOT),

@@ -104,11 +104,10 @@ def main(paths: list[str]) -> None:
 
 def _solved_start(spec_path: Path):  # noqa: ANN202
     """The spec's crude start with its solves applied (what the optimizer starts from)."""
-    from lensopt.optim import Problem
-    from lensopt.optim.writeback import to_spec
+    from lensopt.design import build_problem, to_spec
 
     spec = load_spec(spec_path)
-    p = Problem(spec)
+    p = build_problem(spec)
     return to_spec(p, p.theta0)
 
 

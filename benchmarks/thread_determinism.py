@@ -11,7 +11,7 @@ import time
 
 import torch
 
-from lensopt.optim import optimize
+from lensopt.design import optimize
 from lensopt.spec import dump_json, load_spec
 
 

@@ -132,7 +132,7 @@ def register(app: typer.Typer) -> None:
                                       validate_every=validate_every, validation_patches=val_patches).items()
                 if v is not None}
         cfg = dataclasses.replace(cfg, seed=seed, **over)
-        setup = imaging_setup(model.spec, patch=cfg.patch, fields=fields, sampling=sampling, psf_size=psf_size,
+        setup = imaging_setup(model.camera(), patch=cfg.patch, fields=fields, sampling=sampling, psf_size=psf_size,
                               grid=parse_grid_text(grid, "--grid"), noise_sigma=cfg.noise_sigma, device=None)
         net = dataclasses.replace(net, channels=setup.channels)
         source, val_source, data = data_sources(images, cfg.patch, seed)
@@ -201,7 +201,7 @@ def register(app: typer.Typer) -> None:
         net, ck = load_network(checkpoint, model.spec, device=dev, option="CHECKPOINT")
         im = ck.meta.get("settings", {}).get("imaging", {})
         arr, info = read_image(image)
-        setup = imaging_setup(model.spec, patch=16, fields=int(im.get("fields", 9)),
+        setup = imaging_setup(model.camera(), patch=16, fields=int(im.get("fields", 9)),
                               sampling=im.get("sampling", "rings:8"),
                               psf_size=int(im.get("psf_size", 31)), grid=tuple(im.get("grid", (3, 3))))
         if arr.shape[-1] != net.config.channels:
@@ -256,7 +256,7 @@ def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed:
     """``lensopt optimize`` with ``objective = "restored"``: the joint run, then the lens (and, with
     --checkpoint, the network) written; rank 0 only writes and prints under torchrun."""
     from lensopt.cli import console, err_console
-    from lensopt.optim.joint_run import run_joint
+    from lensopt.design.joint_run import run_joint
     from lensopt.spec import save_json
 
     if output.suffix.lower() != ".json":
@@ -320,8 +320,9 @@ def irm_hook(model: Any, checkpoint: Path) -> Any:
     device = model.lens.device
     net = net.to(device)
     im = ck.meta.get("settings", {}).get("imaging", {})
-    setup = imaging_setup(model.spec, patch=16, fields=int(im.get("fields", 9)), sampling=im.get("sampling", "rings:8"),
-                          psf_size=int(im.get("psf_size", 31)), grid=tuple(im.get("grid", (3, 3))))
+    setup = imaging_setup(model.camera(), patch=16, fields=int(im.get("fields", 9)),
+                          sampling=im.get("sampling", "rings:8"), psf_size=int(im.get("psf_size", 31)),
+                          grid=tuple(im.get("grid", (3, 3))))
 
     def hook(capture: Any, info: dict[str, Any]) -> Any:
         if capture.shape[1] != net.config.channels:

@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 import torch
 
+from lensopt.design import build_problem, optimize
 from lensopt.optics.paraxial import first_order
 from lensopt.optim import Problem
-from lensopt.optim.run import optimize
 from lensopt.spec import build, load_spec
 
 SPECS = Path(__file__).resolve().parents[1] / "specs"
@@ -23,7 +23,7 @@ STUDIES = ["telephoto_5p_tr080.toml", "telephoto_5p1_middle_tr075.toml", "micros
 def study(request: pytest.FixtureRequest) -> tuple[str, Problem]:
     spec = load_spec(SPECS / request.param)
     build(spec)
-    return request.param, Problem(spec)
+    return request.param, build_problem(spec)
 
 
 def test_a_study_starts_with_every_optimization_ray_traced(study: tuple[str, Problem]) -> None:

@@ -14,7 +14,7 @@ import torch
 from torch import Tensor
 
 from lensopt.optim.lm import StepInfo
-from lensopt.spec.optim import AdamSpec
+from lensopt.optim.settings import AdamSettings
 
 __all__ = ["AdamOptimizer"]
 
@@ -32,8 +32,8 @@ class AdamOptimizer:
     """
 
     def __init__(self, theta: Tensor, residuals: Callable[[Tensor], Tensor],
-                 check: Callable[[Tensor], str], settings: AdamSpec | None = None) -> None:
-        self.settings = settings or AdamSpec()
+                 check: Callable[[Tensor], str], settings: AdamSettings | None = None) -> None:
+        self.settings = settings or AdamSettings()
         self._residuals = residuals
         self._check = check
         self._param = theta.detach().clone().requires_grad_(True)

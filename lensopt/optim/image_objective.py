@@ -26,6 +26,7 @@ from torch import Tensor
 
 from lensopt.analysis.psf_stack import select_wavelengths
 from lensopt.errors import LensoptError
+from lensopt.imaging.camera import Camera
 from lensopt.imaging.datasets import DeadLeaves, ImageFolder, sample_batch
 from lensopt.imaging.plan import channel_weights
 from lensopt.imaging.regions import stratified_draw, tile_grid
@@ -39,13 +40,12 @@ from lensopt.imaging.render import (
     trace_spots,
 )
 from lensopt.imaging.scene import Region, Sensor
-from lensopt.optics.lens import Lens, System
+from lensopt.optics.lens import Lens
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling
 from lensopt.optim.gtra import GtraTarget, gtra_residual, gtra_target, psf_window
+from lensopt.optim.settings import ImageSettings
 from lensopt.optim.terms import Term, register_term
-from lensopt.spec.models import LensSpec
-from lensopt.spec.optim import ImageSpec
 
 if TYPE_CHECKING:
     from lensopt.optim.problem import Problem
@@ -63,12 +63,12 @@ def _seed(*parts: object) -> int:
 
 
 class ImageObjective:
-    """Batches, rendering and loss of an image objective for a lens spec.
+    """Batches, rendering and loss of an image objective for a lens on its sensor.
 
     Args:
-        spec: the lens spec (its ``[sensor]`` and spectrum are used).
-        system: the built optical system (wavelength weights).
-        image: ``[optimize.image]``.
+        camera: the lens's sensor (pitch, resolution), spectrum (RGB weights) and system (wavelength
+            weights); its lens is not used (the objective renders the lens it is given).
+        image: the rendering settings (``[optimize.image]``).
         mode: ``gtra`` (LM) or ``scalar`` (Adam).
         dtype: dtype of the image patches (float32 rendering; float64 for identity tests).
 
@@ -76,26 +76,26 @@ class ImageObjective:
         LensoptError: no ``[sensor]`` (or no resolution), an unusable image folder, no RGB weights.
     """
 
-    def __init__(self, spec: LensSpec, system: System, image: ImageSpec, *, mode: str = "gtra",
+    def __init__(self, camera: Camera, image: ImageSettings, *, mode: str = "gtra",
                  dtype: torch.dtype = torch.float32) -> None:
-        if spec.sensor is None:
+        if camera.pixel_pitch_um is None:
             raise LensoptError('objective = "raw" needs a [sensor] (pixel_pitch_um and resolution)', path="sensor")
-        if spec.sensor.resolution is None:
+        if camera.resolution is None:
             raise LensoptError('objective = "raw" needs the sensor resolution', path="sensor.resolution")
         self.spec = image
         self.mode = mode
         self.dtype = dtype
-        self.system = system
-        w, h = (int(v) for v in spec.sensor.resolution)
-        self.sensor = Sensor(spec.sensor.pixel_pitch_um * 1e-3, w, h)
+        self.system = camera.system
+        w, h = (int(v) for v in camera.resolution)
+        self.sensor = Sensor(camera.pixel_pitch_um * 1e-3, w, h)
         self.settings = RenderSettings(psf_size=image.psf_size, grid=tuple(image.grid), overlap=image.overlap,
                                        kernel=image.kernel, diffraction=image.diffraction, noise_sigma=image.noise,
                                        seed=image.seed)
         self.rel_field = torch.linspace(0.0, 1.0, image.fields, dtype=torch.float64)
         sampling = PupilSampling.parse(image.sampling, seed=image.seed, path="optimize.image.sampling")
         self.pupil, self.half = sampling.points(dtype=torch.float64), sampling.half
-        wl = list(spec.spectrum.wavelengths_nm)
-        cw, _, self.rgb_note = channel_weights(spec.spectrum, 3, wl)
+        wl = list(camera.spectrum.wavelengths_nm)
+        cw, _, self.rgb_note = channel_weights(camera.spectrum, 3, wl)
         cw = torch.as_tensor(np.asarray(cw), dtype=torch.float64)
         # Wavelengths that no channel weighs (e.g. a reference wavelength of weight 0) are not rendered.
         self.keep = [i for i in range(cw.shape[0]) if float(cw[i].sum()) > 0]

@@ -23,6 +23,7 @@ import torch
 from torch import Tensor, nn
 
 from lensopt.errors import LensoptError
+from lensopt.imaging.camera import Camera
 from lensopt.imaging.convolve import overlap_add_convolve
 from lensopt.imaging.datasets import DeadLeaves, ImageFolder, sample_batch
 from lensopt.imaging.plan import channel_weights as plan_channel_weights
@@ -76,19 +77,19 @@ class ImagingSetup:
                 "noise_sigma": s.noise_sigma}
 
 
-def imaging_setup(spec: Any, *, patch: int, fields: int = 9, sampling: str = "rings:8", psf_size: int = 31,
+def imaging_setup(camera: Camera, *, patch: int, fields: int = 9, sampling: str = "rings:8", psf_size: int = 31,
                   grid: tuple[int, int] = (3, 3), noise_sigma: float = 0.005, diffraction: bool = False,
                   dtype: torch.dtype = torch.float64, device: torch.device | str | None = None) -> ImagingSetup:
-    """The setup for a lens spec (``lensopt.spec.LensSpec``, read by attribute): its ``[sensor]``
-    (pitch and resolution are required), RGB if the spectrum gives ``rgb_weights`` or has 3 wavelengths,
-    else one channel."""
-    if spec.sensor is None or spec.sensor.resolution is None:
+    """The setup for a lens on its sensor (``lensopt.spec.camera_of(model)`` / ``model.camera()``): the
+    sensor's pitch and resolution are required; RGB if the spectrum gives ``rgb_weights`` or has 3
+    wavelengths, else one channel."""
+    if camera.pixel_pitch_um is None or camera.resolution is None:
         raise LensoptError("needs pixel_pitch_um and resolution to simulate captures", path="sensor")
-    w, h = spec.sensor.resolution
-    sensor = Sensor(spec.sensor.pixel_pitch_um * 1e-3, int(w), int(h))
-    wl = list(spec.spectrum.wavelengths_nm)
-    channels = 3 if (spec.spectrum.rgb_weights is not None or len(wl) == 3) else 1
-    cw, _, _ = plan_channel_weights(spec.spectrum, channels, wl)
+    w, h = camera.resolution
+    sensor = Sensor(camera.pixel_pitch_um * 1e-3, int(w), int(h))
+    wl = list(camera.spectrum.wavelengths_nm)
+    channels = 3 if (camera.spectrum.rgb_weights is not None or len(wl) == 3) else 1
+    cw, _, _ = plan_channel_weights(camera.spectrum, channels, wl)
     settings = RenderSettings(psf_size=psf_size, grid=grid, noise_sigma=noise_sigma, diffraction=diffraction)
     rel = torch.linspace(0.0, 1.0, fields, dtype=dtype, device=device) if fields > 1 else torch.zeros(
         1, dtype=dtype, device=device)

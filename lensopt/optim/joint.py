@@ -28,12 +28,14 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
+from lensopt.imaging.camera import Camera
 from lensopt.imaging.convolve import overlap_add_convolve
 from lensopt.imaging.render import Spots, psfs_from_spots
 from lensopt.imaging.scene import Region
 from lensopt.optim.gtra import GtraTarget, gtra_target, psf_window
 from lensopt.optim.image_objective import ImageObjective
 from lensopt.optim.irm import cosine_lr, network_step, psnr_db, region_grids_for
+from lensopt.optim.settings import ImageSettings
 from lensopt.restore.model import mean_patch_psf
 
 __all__ = ["RestoredObjective", "Dist", "JointState", "joint_step", "evaluate_pair"]
@@ -98,13 +100,13 @@ class RestoredObjective(ImageObjective):
     restored patches. Noise is drawn per step (seeded by seed and step), PSF grids per patch give both
     the capture and the network's conditioning PSF (mean of the sub-tile PSFs)."""
 
-    def __init__(self, spec: Any, system: Any, image: Any, net: nn.Module, *, dist: Dist | None = None,
+    def __init__(self, camera: Camera, image: ImageSettings, net: nn.Module, *, dist: Dist | None = None,
                  device: torch.device | str = "cpu", dtype: torch.dtype = torch.float32) -> None:
         self.step_index = 0
         self.dist = dist or Dist()
         self.device = torch.device(device)
         self.noise_seed = 0
-        super().__init__(spec, system, image, mode="gtra", dtype=dtype)
+        super().__init__(camera, image, mode="gtra", dtype=dtype)
         if image.batch % self.dist.world:
             from lensopt.errors import LensoptError
 

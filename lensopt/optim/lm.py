@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from lensopt.spec.optim import LMSpec
+from lensopt.optim.settings import LMSettings
 
 __all__ = ["Trial", "StepInfo", "LevenbergMarquardt", "damped_step"]
 
@@ -130,8 +130,8 @@ class LevenbergMarquardt:
     """
 
     def __init__(self, theta: Tensor, jacobian: Callable[[Tensor], tuple[Tensor, Tensor]],
-                 evaluate: Callable[[Tensor], Trial], settings: LMSpec | None = None) -> None:
-        self.settings = settings or LMSpec()
+                 evaluate: Callable[[Tensor], Trial], settings: LMSettings | None = None) -> None:
+        self.settings = settings or LMSettings()
         self.theta = theta.detach().clone()
         self._jacobian = jacobian
         self._evaluate = evaluate

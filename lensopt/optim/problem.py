@@ -1,5 +1,7 @@
-"""The optimization problem of a spec: θ, the one residual function ℓ(θ), its Jacobian, the checks
-that reject non-physical steps, binding of glasses to the catalog, and θ → spec (DESIGN.md rule 4).
+"""The optimization problem: θ, the one residual function ℓ(θ), its Jacobian, and the checks that reject
+non-physical steps (DESIGN.md rule 4). Plain tensors and dataclasses only: the setup from a spec (reading
+the spec, the solves, the declared variables, the settings) is ``lensopt.design.setup.build_problem``,
+and θ → spec is ``lensopt.design.writeback``.
 
 ``residuals(θ)`` is pure: it rebuilds the lens from θ, applies the solves, traces the optimization
 rays with ``trace_bundle`` (so aiming, vignetting and apertures of the optics core apply) and
@@ -17,23 +19,66 @@ from torch import Tensor
 
 from lensopt.analysis.spot import spot_stats
 from lensopt.errors import LensoptError, SpecError
-from lensopt.materials import design_catalog
+from lensopt.imaging.camera import Camera
+from lensopt.materials import Material, design_catalog
 from lensopt.materials.glass_space import GlassMesh, GlassSpace, glass_mesh, glass_space
 from lensopt.optics.bundle import Bundle, trace_bundle
-from lensopt.optics.lens import Lens
+from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling
 from lensopt.optim import residuals
 from lensopt.optim.image_objective import ImageObjective
 from lensopt.optim.rays import head, with_rim
 from lensopt.optim.schedule import schedule_weight
-from lensopt.optim.solves import apply_solves, resolve_solves, solved_quantities
+from lensopt.optim.settings import ImageSettings, OptimizeSettings
+from lensopt.optim.solves import Solve, apply_solves, solved_quantities
 from lensopt.optim.terms import TERMS, TermContext
-from lensopt.optim.variables import Parameterization
-from lensopt.spec.models import LensSpec
-from lensopt.spec.optim import ImageSpec, OptimizeSpec
+from lensopt.optim.variables import Declared, Parameterization
 
-__all__ = ["Evaluation", "Problem"]
+__all__ = ["Evaluation", "Problem", "ProblemSetup", "SurfaceInfo"]
+
+
+@dataclass(frozen=True)
+class SurfaceInfo:
+    """What the residual terms and reports need to know about one surface.
+
+    Attributes:
+        glass_after: the medium after the surface is not air (the gap is an element).
+        plane: the surface is of type ``plane`` (no surface-normal residual).
+        material_varies: the medium after the surface is a glass variable.
+    """
+
+    glass_after: bool
+    plane: bool
+    material_varies: bool = False
+
+
+@dataclass(frozen=True)
+class ProblemSetup:
+    """Everything a ``Problem`` is made of, as plain data (``lensopt.design.setup`` reads it from a spec).
+
+    Attributes:
+        lens: the lens at its start values (dtype and device of the whole problem), with a column for
+            every varied coefficient power.
+        system: aperture, field, object, wavelength and field weights.
+        media: (S+1) materials: object space, then the medium after every surface.
+        surfaces: (S) per-surface facts.
+        declared: the variables in θ order.
+        solves: resolved solves in application order.
+        settings: the optimization settings.
+        defocus: image defocus (mm) kept by a focus solve.
+        camera: the lens on its sensor (sensor, spectrum): needed by image objectives.
+    """
+
+    lens: Lens
+    system: System
+    media: tuple[Material, ...]
+    surfaces: tuple[SurfaceInfo, ...]
+    declared: tuple[Declared, ...]
+    solves: tuple[Solve, ...] = ()
+    settings: OptimizeSettings = OptimizeSettings()
+    defocus: float = 0.0
+    camera: Camera | None = None
 
 
 @dataclass(frozen=True)
@@ -55,46 +100,46 @@ class Evaluation:
 
 
 class Problem:
-    """Variables, solves and residual groups of ``spec`` (its ``[optimize]`` section or defaults).
+    """Variables, solves and residual groups of a ``ProblemSetup``.
 
     Args:
-        spec: the lens spec with ``vary`` lists.
+        setup: the lens, its declared variables, solves and settings (dtype and device: those of
+            ``setup.lens``; design work runs in float64).
         seed: seed of the pupil jitter (``rings`` sampling).
-        dtype: float64 for design work.
-        device: where every tensor of the problem lives (θ, the lens, the rays, the Jacobian).
+        method: ``lm`` or ``adam`` (default: the settings' optimizer): image objectives use GTRA for LM,
+            the scalar loss for Adam.
+        image_dtype: dtype of the rendered image patches.
     """
 
-    def __init__(self, spec: LensSpec, *, seed: int = 0, dtype: torch.dtype = torch.float64,
-                 method: str | None = None, image_dtype: torch.dtype = torch.float32,
-                 device: torch.device | str | None = None) -> None:
-        self.opt: OptimizeSpec = spec.optimize or OptimizeSpec()
+    def __init__(self, setup: ProblemSetup, *, seed: int = 0, method: str | None = None,
+                 image_dtype: torch.dtype = torch.float32) -> None:
+        self.setup = setup
+        self.opt: OptimizeSettings = setup.settings
         self.objective: str = self.opt.objective or "spot"
         self.image: ImageObjective | None = None
         self.seed = seed
-        self.dtype = dtype
-        self.device = torch.device(device or "cpu")
-        self.solves = resolve_solves(spec)
-        skip = solved_quantities(self.solves, len(spec.surfaces))
-        varies_glass = any("material" in s.vary for s in spec.surfaces)
+        lens0 = setup.lens
+        self.dtype = dtype = lens0.dtype
+        self.device = lens0.device
+        self.system = setup.system
+        self.media = setup.media
+        self.surfaces = setup.surfaces
+        self.solves = list(setup.solves)
+        skip = solved_quantities(self.solves, len(setup.surfaces))
         self.space: GlassSpace | None = None
-        if varies_glass:
+        if any(d.kind == "glass" for d in setup.declared):
             try:
                 cat = design_catalog(self.opt.catalog)
             except LensoptError as err:
                 raise err.at("optimize.catalog") from None
             self.space = glass_space(cat, self.opt.glass_parameters)
-        probe = Parameterization(spec, alpha=1.0, glass=self.space, skip=skip, dtype=dtype, device=self.device)
         alpha = self.opt.alpha
         if alpha is None:
-            alpha = float(first_order(probe.model.lens, probe.model.system).epd) / 2.0
-        self.param = Parameterization(spec, alpha=alpha, glass=self.space,
-                                      asphere_basis=self.opt.asphere_basis, skip=skip, dtype=dtype,
-                                      device=self.device)
-        self.spec = self.param.spec
-        self.model = self.param.model
-        self.system = self.model.system
+            alpha = float(first_order(lens0, self.system).epd) / 2.0
+        self.param = Parameterization(lens0, setup.media, setup.declared, alpha=alpha, glass=self.space,
+                                      asphere_basis=self.opt.asphere_basis, skip=skip)
         self.alpha = alpha
-        self.defocus = self.spec.image.defocus
+        self.defocus = setup.defocus
         cons = self.opt.constraints
         self.mesh: GlassMesh | None = None
         if self.space is not None and cons.glass_mesh is not None:
@@ -105,20 +150,22 @@ class Problem:
                               half=self.sampling.half).to(self.device)
         fw = self.system.field_weights or (1.0,) * self.system.num_fields
         self.field_weights = torch.tensor(fw, dtype=dtype, device=self.device)
-        lens0 = self.model.lens
-        self.glass_gap = [not s.is_air for s in self.spec.surfaces]
+        self.glass_gap = [s.glass_after for s in setup.surfaces]
         self.interfaces = [
             s for s in range(lens0.num_surfaces)
             if lens0.shapes[s].diffractive or bool((lens0.index[s] != lens0.index[s + 1]).any())
-            or ("material" in self.spec.surfaces[s].vary)
-            or (s > 0 and "material" in self.spec.surfaces[s - 1].vary)
+            or setup.surfaces[s].material_varies
+            or (s > 0 and setup.surfaces[s - 1].material_varies)
         ]
         self.failure_penalty = cons.ray_failure.penalty_mm or alpha
         self.path_spans = self._path_spans()
         self.theta0 = self.param.initial()
         if self.objective in ("raw", "restored"):  # "restored": optim.joint replaces it with RestoredObjective
+            if setup.camera is None:
+                raise LensoptError('objective = "raw" needs a [sensor] (pixel_pitch_um and resolution)',
+                                   path="sensor")
             mode = "scalar" if (method or self.opt.optimizer) == "adam" else "gtra"
-            self.image = ImageObjective(self.spec, self.system, self.opt.image or ImageSpec(), mode=mode,
+            self.image = ImageObjective(setup.camera, self.opt.image or ImageSettings(), mode=mode,
                                         dtype=image_dtype)
         self.slices = self._layout()
         self.size = max((sl.stop for sl in self.slices.values()), default=0)
@@ -186,7 +233,7 @@ class Problem:
     def _path_spans(self) -> list[tuple[int, int, float, float]]:
         """``ray_path.spans`` as (first surface, end surface, lower, upper); the image is surface S."""
         rp = self.opt.constraints.ray_path
-        S = len(self.spec.surfaces)
+        S = len(self.surfaces)
         out = []
         for i, sp in enumerate((rp.spans if rp is not None else None) or []):
             path = f"optimize.constraints.ray_path.spans[{i}]"

@@ -80,7 +80,7 @@ def constraint_report(problem: Problem, theta: torch.Tensor, sampling: PupilSamp
         out["max_angle_deg"] = _deg(torch.maximum(worst, zero))
         if cons.ray_angle is not None:
             ok &= out["max_angle_deg"] <= cons.ray_angle.max_deg + TOLERANCE["deg"]
-        normals = [s for s in problem.interfaces if problem.spec.surfaces[s].type != "plane"]
+        normals = [s for s in problem.interfaces if not problem.surfaces[s].plane]
         nz2 = torch.ones((), dtype=tz.dtype)
         for s in normals:
             nz2 = torch.minimum(nz2, torch.where(valid, bundle.result.hits[s].normal[..., 2] ** 2, 1.0).min())
@@ -98,14 +98,14 @@ def constraint_report(problem: Problem, theta: torch.Tensor, sampling: PupilSamp
         glass = problem.param.glass_physical(theta).tolist()
         gvars = [v.surface for v in problem.param.of_kind("glass")]
         mats = []
-        for s, surf in enumerate(problem.spec.surfaces):
-            if surf.is_air:
+        for s, surf in enumerate(problem.surfaces):
+            if not surf.glass_after:
                 continue
             if s in gvars:
                 nd, vd, dp = glass[gvars.index(s)]
                 mats.append({"surface": s, "material": "model (free)", "nd": nd, "vd": vd, "dpgf": dp})
             else:
-                m = problem.model.media[s + 1]
+                m = problem.media[s + 1]
                 mats.append({"surface": s, "material": m.label, "nd": m.nd, "vd": m.vd})
         out["materials"] = mats
         out["satisfied"] = bool(ok)

@@ -1,12 +1,15 @@
 """The optimization driver: phases (glasses free, then bound to the catalog, S4.1.3), the glass
 catalog weight schedule, stopping rules, progress reports, Ctrl-C. Library code: no printing; the
-CLI renders the ``Progress`` records it receives."""
+CLI renders the ``Progress`` records it receives. It runs a ``Problem``; binding the glasses rebuilds
+the problem through a callback (``lensopt.design.optimize`` runs a spec: it builds the problem, binds
+through the spec, and writes the result back as a spec)."""
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import torch
 
@@ -16,10 +19,9 @@ from lensopt.optim.compiled_jacobian import CompiledJacobian
 from lensopt.optim.image_objective import psnr_db
 from lensopt.optim.lm import LevenbergMarquardt, Trial
 from lensopt.optim.problem import Problem
-from lensopt.optim.writeback import BoundGlass, bind_glasses, to_spec
-from lensopt.spec.models import LensSpec
 
-__all__ = ["Progress", "OptimizeResult", "OptimizeError", "optimize", "make_optimizer", "resolve_device", "JACOBIANS"]
+__all__ = ["Progress", "OptimizeResult", "OptimizeError", "Rebind", "run_problem", "make_optimizer", "resolve_device",
+           "JACOBIANS"]
 
 JACOBIANS = ("eager", "compiled")
 
@@ -70,10 +72,11 @@ class OptimizeResult:
     """What an optimization run produced.
 
     Attributes:
-        spec: the optimized lens (values, solves and bound glasses written back).
+        spec: the optimized lens (values, solves and bound glasses written back) as a ``LensSpec``; set by
+            ``lensopt.design.optimize`` (None from ``run_problem``).
         problem: the problem of the last phase; ``theta`` its final variables.
         steps: steps taken; stop_reason: why it stopped; interrupted: Ctrl-C.
-        bound: glasses bound to the catalog.
+        bound: glasses bound to the catalog (what the ``bind`` callback returned).
         history: (step, elapsed s, merit, ESR µm) per step.
         start_esr_um, start_merit: at the start point.
         warning: set when optimization rays still fail at the end (how many, why).
@@ -81,13 +84,13 @@ class OptimizeResult:
         image_history: (step, image loss) per step of an image objective.
     """
 
-    spec: LensSpec
+    spec: Any
     problem: Problem
     theta: torch.Tensor
     steps: int
     stop_reason: str
     interrupted: bool
-    bound: list[BoundGlass]
+    bound: list[Any]
     history: list[tuple[int, float, float, float]] = field(default_factory=list)
     start_esr_um: float = float("nan")
     start_merit: float = float("nan")
@@ -139,26 +142,29 @@ def resolve_device(device: str | None) -> torch.device:
     return dev
 
 
-def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None = None, seed: int = 0,
-             callback: Callable[[Progress], None] | None = None, device: str | torch.device | None = None,
-             jacobian: str = "eager") -> OptimizeResult:
-    """Optimize ``spec`` (its ``vary`` lists and ``[optimize]`` section).
+Rebind = Callable[[Problem, torch.Tensor], tuple[Problem, list[Any]]]
+"""Bind the glass variables of θ to the catalog: the problem of the next phase (glasses fixed) and what
+was bound."""
+
+
+def run_problem(problem: Problem, *, optimizer: str | None = None, steps: int | None = None,
+                callback: Callable[[Progress], None] | None = None, jacobian: str = "eager",
+                bind: Rebind | None = None) -> OptimizeResult:
+    """Optimize ``problem`` from its start θ0.
 
     Ctrl-C (KeyboardInterrupt) ends the run early; the result then holds the best lens so far.
-    ``device``: where the problem's tensors live (default CPU); ``jacobian``: ``eager`` or
-    ``compiled`` (see ``make_optimizer``).
+    ``optimizer``: ``lm`` or ``adam`` (default: the settings'); ``steps``: default the settings';
+    ``jacobian``: ``eager`` or ``compiled`` (see ``make_optimizer``); ``bind``: how the glasses are bound
+    at ``bind_at`` of the run (None: they are not).
 
     Raises:
         OptimizeError: nothing varies, or the start lens is not usable (the message says why).
     """
     t0 = time.perf_counter()
-    dev = device if isinstance(device, torch.device) else resolve_device(device)
     if jacobian not in JACOBIANS:
         raise LensoptError(f"must be one of {', '.join(JACOBIANS)}", path="--jacobian", got=jacobian)
-    opt0 = spec.optimize
-    method = optimizer or (opt0.optimizer if opt0 is not None else "lm")
-    problem = Problem(spec, seed=seed, method=method, device=dev)
     opt = problem.opt
+    method = optimizer or opt.optimizer
     total = steps if steps is not None else opt.steps
     if problem.num_variables == 0:
         raise OptimizeError("nothing to optimize: no surface has a vary list", path="surfaces")
@@ -166,14 +172,14 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
     if not start.physical:
         raise OptimizeError(f"the start lens cannot be optimized: {start.reason}")
     scale0 = problem.row_scale(0.0)
-    result = OptimizeResult(spec=spec, problem=problem, theta=problem.theta0, steps=0, stop_reason="",
+    result = OptimizeResult(spec=None, problem=problem, theta=problem.theta0, steps=0, stop_reason="",
                             interrupted=False, bound=[],
                             start_esr_um=1e3 * problem.esr_mm(start.residuals),
                             start_merit=0.5 * float(((scale0 * start.residuals) ** 2).sum()))
     if problem.image is not None:
         result.start_esr_um = 1e3 * problem.spot_esr_mm(problem.theta0)
         result.start_psnr_db = problem.image.held_out_psnr(problem.lens(problem.theta0)[0])
-    bind_step = round(opt.bind_at * total) if problem.num_glasses and opt.bind_at < 1 else None
+    bind_step = round(opt.bind_at * total) if bind is not None and problem.num_glasses and opt.bind_at < 1 else None
     state = make_optimizer(problem, problem.theta0, method, jacobian)
     phase = "glasses free" if problem.num_glasses else "fixed glasses"
     failing = 1.0 - start.valid_fraction
@@ -182,7 +188,7 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
     try:
         while k < total:
             if bind_step is not None and k >= bind_step and not result.bound:
-                problem, state, event = _bind(problem, state, result, method, seed, jacobian)
+                problem, state, event = _bind(problem, state, result, method, bind, jacobian)
                 phase = "glasses bound"
             frac = k / total
             scale = problem.row_scale(frac)
@@ -219,7 +225,7 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
         else:
             result.stop_reason = f"{total} steps"
         if bind_step is not None and not result.bound and bind_step <= k and not result.interrupted:
-            problem, state, _ = _bind(problem, state, result, method, seed, jacobian)
+            problem, state, _ = _bind(problem, state, result, method, bind, jacobian)
     except KeyboardInterrupt:
         result.interrupted = True
         result.stop_reason = "interrupted"
@@ -227,7 +233,6 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
     result.theta = state.theta
     if problem.image is not None:
         result.final_psnr_db = problem.image.held_out_psnr(problem.lens(result.theta)[0])
-    result.spec = to_spec(problem, result.theta)
     failed, rays, reasons = problem.failure_summary(result.theta)
     if failed:
         why = ", ".join(f"{k}: {v}" for k, v in reasons.items())
@@ -264,13 +269,11 @@ def _valid_fraction(problem: Problem, r: torch.Tensor | None) -> float:
     return float((rows == 0).to(r.dtype).mean())
 
 
-def _bind(problem: Problem, state, result: OptimizeResult, method: str, seed: int,  # noqa: ANN001, ANN202
+def _bind(problem: Problem, state, result: OptimizeResult, method: str, bind: Rebind,  # noqa: ANN001, ANN202
           jacobian: str = "eager"):
-    """Bind glasses to the catalog, rebuild the problem without glass variables, reset the optimizer."""
-    spec, bound = bind_glasses(problem, state.theta)
-    if spec.optimize is not None and spec.optimize.sampling_after_binding:
-        spec.optimize = spec.optimize.model_copy(update={"sampling": spec.optimize.sampling_after_binding})
-    new = Problem(spec, seed=seed, method=method, device=problem.device)
+    """Bind glasses to the catalog (``bind`` rebuilds the problem without glass variables), reset the
+    optimizer."""
+    new, bound = bind(problem, state.theta)
     ev = new.evaluate(new.theta0)
     if not ev.physical:
         raise OptimizeError(f"binding the glasses to the catalog made the lens unusable: {ev.reason}")

@@ -16,7 +16,6 @@ from dataclasses import dataclass, replace
 import torch
 from torch import Tensor
 
-from lensopt.errors import SpecError
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import (
     chief_image_height,
@@ -25,54 +24,19 @@ from lensopt.optics.paraxial import (
     ray_transfer,
     trace_paraxial,
 )
-from lensopt.spec.models import LensSpec
 
-__all__ = ["Solve", "resolve_solves", "solved_quantities", "apply_solves"]
+__all__ = ["Solve", "solved_quantities", "apply_solves"]
 
 
 @dataclass(frozen=True)
 class Solve:
-    """A resolved solve: kind, 0-based surface (curvature solves), target value (mm)."""
+    """A resolved solve: kind, 0-based surface (curvature solves), target value (mm). Solves are resolved
+    from a spec (checked against its surfaces, in application order: ttl, then efl/image_height, then
+    focus) by ``lensopt.design.setup.resolve_solves``."""
 
     kind: str
     surface: int | None
     value: float | None
-
-
-def resolve_solves(spec: LensSpec) -> list[Solve]:
-    """Check the spec's solves against its surfaces; return them in application order."""
-    opt = spec.optimize
-    if opt is None:
-        return []
-    S = len(spec.surfaces)
-    out: list[Solve] = []
-    for i, sol in enumerate(opt.solves):
-        path = f"optimize.solves[{i}]"
-        surface = None
-        if sol.type in ("efl", "image_height"):
-            surface = S - 1 if sol.surface is None else sol.surface
-            if not -S <= surface < S:
-                raise SpecError(f"no such surface (the lens has {S})", path=f"{path}.surface", got=sol.surface)
-            surface %= S
-            surf = spec.surfaces[surface]
-            base = surf.base if surf.type == "diffractive" else surf
-            if base.type == "plane":
-                raise SpecError("a curvature solve needs a curved surface type (sphere, conic, asphere)",
-                                path=f"{path}.surface", got=sol.surface)
-            before = "air" if surface == 0 else spec.surfaces[surface - 1].material
-            if before == surf.material:
-                raise SpecError("a curvature solve needs a change of medium at the surface",
-                                path=f"{path}.surface", got=sol.surface)
-            if sol.type == "image_height":
-                if surface <= spec.stop_index:
-                    raise SpecError("an image_height solve must act on a surface after the aperture stop",
-                                    path=f"{path}.surface", got=sol.surface)
-                if spec.system.field.hfov_deg is None:
-                    raise SpecError("an image_height solve needs an angular field (system.field.hfov_deg)",
-                                    path=path)
-        out.append(Solve(sol.type, surface, sol.value))
-    rank = {"ttl": 0, "efl": 1, "image_height": 1, "focus": 2}
-    return sorted(out, key=lambda s: rank[s.kind])
 
 
 def solved_quantities(solves: list[Solve], num_surfaces: int) -> frozenset[tuple[str, int]]:

@@ -1,7 +1,7 @@
 """The registry of residual terms (S2.2, Table S6; S3.1): one place to add a term.
 
 A term is its name (the group name in ``Problem.slices`` and the progress display), a report line, its
-static weight (None = off) read from the problem's settings, the spec object that may carry a weight
+static weight (None = off) read from the problem's settings, the settings object that may carry a weight
 ``schedule``, and its residual function of a ``TermContext`` (the lens, the traced optimization rays
 and their spot statistics at θ). ``Problem`` concatenates the active terms in registry order.
 
@@ -59,7 +59,7 @@ class Term:
         label: one report line (what it measures, where in the seed).
         weight: problem ↦ static weight, or None when the term is off.
         residual: context ↦ (M_t,) unweighted residuals, length fixed by the problem.
-        config: problem ↦ the spec object of the term (its ``schedule`` is used), or None.
+        config: problem ↦ the settings object of the term (its ``schedule`` is used), or None.
     """
 
     name: str
@@ -104,7 +104,7 @@ def _glass_weight(name: str) -> Callable[[Problem], float | None]:
 
 
 def _refracting(c: TermContext) -> list[int]:
-    return [s for s in c.problem.interfaces if not c.problem.spec.surfaces[s].type == "plane"]
+    return [s for s in c.problem.interfaces if not c.problem.surfaces[s].plane]
 
 
 register_term(Term(

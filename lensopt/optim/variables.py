@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -25,13 +26,11 @@ import torch
 from torch import Tensor
 
 from lensopt.errors import SpecError
-from lensopt.materials import CatalogGlass, ModelGlass, hartmann_index
+from lensopt.materials import CatalogGlass, Material, ModelGlass, hartmann_index
 from lensopt.materials.glass_space import GlassSpace
 from lensopt.optics.lens import Lens
-from lensopt.spec.build import Model, build
-from lensopt.spec.models import DiffractiveSurface, LensSpec
 
-__all__ = ["Variable", "Parameterization", "bernstein_to_monomial"]
+__all__ = ["Declared", "Variable", "Parameterization", "bernstein_to_monomial"]
 
 Kind = Literal["thickness", "curvature", "conic", "asphere", "phase", "glass"]
 
@@ -71,101 +70,65 @@ def bernstein_to_monomial(n: int, *, dtype: torch.dtype) -> Tensor:
     return M
 
 
-def _base_of(surf):  # noqa: ANN001, ANN202 - spec surface → its shape part
-    return surf.base if isinstance(surf, DiffractiveSurface) else surf
+@dataclass(frozen=True)
+class Declared:
+    """A declared variable before scaling: what it sets, on which surface, at which power (asphere and
+    phase coefficients). ``lensopt.design.setup.declare_variables`` reads them from a spec's ``vary``
+    lists, in θ order."""
 
-
-def prepare_spec(spec: LensSpec) -> LensSpec:
-    """Copy of ``spec`` where every varied coefficient power exists (0 where the spec has none)."""
-    spec = spec.model_copy(deep=True)
-    for surf in spec.surfaces:
-        for item in surf.vary:
-            name, _, power = item.partition(".")
-            if not power:
-                continue
-            if name == "coefficients":
-                base = _base_of(surf)
-                if int(power) not in base.coefficients:
-                    base.coefficients = {**base.coefficients, int(power): 0.0}
-            elif name == "phase" and int(power) not in surf.phase:
-                surf.phase = {**surf.phase, int(power): 0.0}
-    return spec
+    kind: Kind
+    surface: int
+    power: int | None = None
 
 
 class Parameterization:
-    """Variables of a spec, their scaling, and the map θ → Lens (before solves).
+    """Declared variables, their scaling, and the map θ → Lens (before solves).
 
     Args:
-        spec: the lens spec (``vary`` lists say what varies).
+        lens: the lens at its start values, with a column for every varied coefficient power; its dtype
+            and device are those of θ.
+        media: (S+1) materials (object space, then the medium after every surface): the start values of
+            glass variables.
+        declared: the variables in θ order (asphere powers of a surface ascending).
         alpha: scale factor α in mm.
         glass: whitened glass space (needed when a material varies).
         asphere_basis: ``monomial`` or ``bezier``.
         skip: (kind, surface) pairs that are solved and so must not be in θ.
-        dtype, device: of the lens tensors and θ (default device: the CPU).
     """
 
-    def __init__(self, spec: LensSpec, *, alpha: float, glass: GlassSpace | None,
-                 asphere_basis: str = "monomial", skip: frozenset[tuple[str, int]] = frozenset(),
-                 dtype: torch.dtype = torch.float64, device: torch.device | str | None = None) -> None:
-        self.spec = prepare_spec(spec)
-        self.model: Model = build(self.spec, dtype=dtype, device=device)
-        self.device = self.model.lens.device
+    def __init__(self, lens: Lens, media: Sequence[Material], declared: Sequence[Declared], *, alpha: float,
+                 glass: GlassSpace | None, asphere_basis: str = "monomial",
+                 skip: frozenset[tuple[str, int]] = frozenset()) -> None:
+        self.base = lens
+        self.media = tuple(media)
+        self.device = lens.device
         self.alpha = alpha
         self.glass = glass
         self.asphere_basis = asphere_basis
-        self.dtype = dtype
+        self.dtype = lens.dtype
         self.variables: list[Variable] = []
         self._bezier: dict[int, Tensor] = {}
         n = 0
-        for s, surf in enumerate(self.spec.surfaces):
-            for kind, power in self._surface_variables(s, surf):
-                if (kind, s) in skip:
-                    name = "radius" if kind == "curvature" else kind
-                    raise SpecError(f"{name} is set by a solve (optimize.solves); remove it from vary",
-                                    path=f"surfaces[{s}].vary")
-                size = glass.dims if kind == "glass" and glass is not None else 1
-                self.variables.append(Variable(kind, s, power, n, size))
-                n += size
+        for d in declared:
+            if (d.kind, d.surface) in skip:
+                name = "radius" if d.kind == "curvature" else d.kind
+                raise SpecError(f"{name} is set by a solve (optimize.solves); remove it from vary",
+                                path=f"surfaces[{d.surface}].vary")
+            if d.kind == "glass" and glass is None:
+                raise SpecError("glass variables need a design catalog", path="optimize.catalog")
+            size = glass.dims if d.kind == "glass" and glass is not None else 1
+            self.variables.append(Variable(d.kind, d.surface, d.power, n, size))
+            n += size
         self.size = n
+        if asphere_basis == "bezier":
+            for s in sorted({v.surface for v in self.of_kind("asphere")}):
+                asph = [v.power for v in self.of_kind("asphere") if v.surface == s]
+                if asph != list(range(4, 4 + 2 * len(asph), 2)):
+                    raise SpecError("the bezier basis needs the consecutive powers 4, 6, … varied",
+                                    path=f"surfaces[{s}].vary", got=asph)
+                self._bezier[s] = bernstein_to_monomial(len(asph), dtype=self.dtype).to(self.device)
 
     # ---------------------------------------------------------------------------------- structure
-
-    def _surface_variables(self, s: int, surf) -> list[tuple[Kind, int | None]]:  # noqa: ANN001
-        out: list[tuple[Kind, int | None]] = []
-        base = _base_of(surf)
-        names = list(dict.fromkeys(surf.vary))
-        for item in names:
-            name, _, power = item.partition(".")
-            if name == "thickness":
-                out.append(("thickness", None))
-            elif name == "radius":
-                out.append(("curvature", None))
-            elif name == "conic":
-                out.append(("conic", None))
-            elif name == "material":
-                if surf.is_air:
-                    raise SpecError("air cannot vary; give the element a glass to start from",
-                                    path=f"surfaces[{s}].vary")
-                if self.glass is None:
-                    raise SpecError("glass variables need a design catalog", path="optimize.catalog")
-                out.append(("glass", None))
-            elif name in ("coefficients", "phase"):
-                table = base.coefficients if name == "coefficients" else surf.phase
-                powers = [int(power)] if power else sorted(table)
-                if not powers:
-                    raise SpecError(f"no {name} to vary; name the powers, e.g. {name}.{4 if name[0] == 'c' else 2}",
-                                    path=f"surfaces[{s}].vary")
-                kind: Kind = "asphere" if name == "coefficients" else "phase"
-                out.extend((kind, p) for p in powers)
-        asph = sorted(p for k, p in out if k == "asphere")
-        if asph and self.asphere_basis == "bezier":
-            if asph != list(range(4, 4 + 2 * len(asph), 2)):
-                raise SpecError("the bezier basis needs the consecutive powers 4, 6, … varied",
-                                path=f"surfaces[{s}].vary", got=asph)
-            self._bezier[s] = bernstein_to_monomial(len(asph), dtype=self.dtype).to(self.device)
-        # θ order within a surface: as declared, with the asphere powers ascending (Bézier points).
-        rest = [(k, p) for k, p in out if k != "asphere"]
-        return rest + [("asphere", p) for p in asph]
 
     def of_kind(self, kind: Kind) -> list[Variable]:
         return [v for v in self.variables if v.kind == kind]
@@ -173,8 +136,8 @@ class Parameterization:
     # ------------------------------------------------------------------------------------ θ ↔ lens
 
     def initial(self) -> Tensor:
-        """θ of the spec's own values."""
-        lens, a = self.model.lens, self.alpha
+        """θ of the start lens's own values."""
+        lens, a = self.base, self.alpha
         vals: list[Tensor] = []
         for v in self.variables:
             s = v.surface
@@ -200,7 +163,7 @@ class Parameterization:
         return torch.cat([x.reshape(-1) for x in vals])
 
     def _glass_values(self, s: int) -> Tensor:
-        mat = self.model.media[s + 1]
+        mat = self.media[s + 1]
         dpgf = 0.0
         if isinstance(mat, ModelGlass):
             dpgf = mat.dpgf
@@ -226,8 +189,8 @@ class Parameterization:
         return torch.stack(rows) if rows else torch.zeros(0, d, dtype=theta.dtype, device=theta.device)
 
     def lens(self, theta: Tensor) -> Lens:
-        """The lens for θ (solved quantities still at their spec values)."""
-        base, a = self.model.lens, self.alpha
+        """The lens for θ (solved quantities still at their start values)."""
+        base, a = self.base, self.alpha
         S = base.num_surfaces
         curv, thick, conic = list(base.curvature.unbind()), list(base.thickness.unbind()), list(base.conic.unbind())
         asph = [list(row.unbind()) for row in base.asphere] if base.asphere.shape[1] else [[] for _ in range(S)]

@@ -112,11 +112,11 @@ def _margins(spec: LensSpec, sampling: PupilSampling) -> dict[str, float]:
     """Constraint margins (positive: inside the limit) of the constraints the spec declares."""
     if spec.optimize is None:
         return {}
-    from lensopt.optim import Problem
+    from lensopt.design import build_problem
     from lensopt.optim.report import constraint_report
 
     cons = spec.optimize.constraints
-    problem = Problem(spec, seed=sampling.seed)
+    problem = build_problem(spec, seed=sampling.seed)
     rep = constraint_report(problem, problem.theta0, sampling)
     out: dict[str, float] = {}
     if "gaps" in rep:

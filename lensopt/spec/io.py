@@ -23,9 +23,49 @@ from lensopt.spec.models import LensSpec
 __all__ = ["load_spec", "parse_spec", "dump_json", "save_json", "format_loc", "load_tolerances"]
 
 
+_MAX_STARTS = 8
+
+
 def load_spec(path: str | Path) -> LensSpec:
-    """Read a ``.toml`` spec or a ``.json`` lens; raise ``SpecError`` naming the bad field."""
-    path = Path(path)
+    """Read a ``.toml`` spec or a ``.json`` lens; raise ``SpecError`` naming the bad field.
+
+    A file may begin with ``start = "other.json"`` (a path relative to the file): the lens of that file
+    (a spec or a lens, itself possibly with a ``start``) is the starting point and every top-level key
+    of this file replaces the start's key of the same name, whole tables at a time (e.g. a polishing run
+    is a ``start`` and a new ``[optimize]``).
+    """
+    try:
+        return parse_spec(_load_data(Path(path), ()))
+    except RecursionError:
+        raise SpecError("nested too deeply to be a lens", path=str(path)) from None
+
+
+def _load_data(path: Path, chain: tuple[Path, ...]) -> dict[str, Any]:
+    """The plain data of a spec file, its ``start`` resolved (``chain``: the files that start from it)."""
+    data = _read_data(path)
+    if not isinstance(data, dict) or "start" not in data:
+        return data
+    start = data.pop("start")
+    where = f"{path}: start"
+    if not isinstance(start, str) or not start:
+        raise SpecError("must be the path of a .toml spec or a .json lens, relative to this file", path=where,
+                        got=start)
+    target = (path.parent / start).resolve()
+    if target in chain or target == path.resolve():
+        raise SpecError("the files start from each other in a cycle", path=where, got=start)
+    if len(chain) >= _MAX_STARTS:
+        raise SpecError(f"more than {_MAX_STARTS} files start from each other", path=where, got=start)
+    if not target.is_file():
+        raise SpecError(f"no such file ({target}); write it first (e.g. with the lensopt optimize run this "
+                        "file continues)", path=where, got=start)
+    base = _load_data(target, (*chain, path.resolve()))
+    if not isinstance(base, dict):
+        raise SpecError("the start file is not a table of sections", path=where, got=start)
+    return {**base, **data}
+
+
+def _read_data(path: Path) -> Any:
+    """The parsed TOML or JSON of ``path`` (no validation)."""
     if path.is_dir():
         raise SpecError("is a directory; expected a .toml spec or a .json lens file", path=str(path))
     if not path.is_file():
@@ -49,10 +89,7 @@ def load_spec(path: str | Path) -> LensSpec:
         raise SpecError("nested too deeply to be a lens", path=str(path)) from None
     except ValueError as err:  # an integer of more than 4300 digits
         raise SpecError(f"unreadable number: {err}", path=str(path)) from None
-    try:
-        return parse_spec(data)
-    except RecursionError:
-        raise SpecError("nested too deeply to be a lens", path=str(path)) from None
+    return data
 
 
 def parse_spec(data: dict[str, Any]) -> LensSpec:

@@ -6,8 +6,8 @@ N starts per grid point, the best start kept per point. Library code: no printin
   (validated again, built once before any work).
 - Starts: start 0 is the point's spec as written. Start k ≥ 1 perturbs the start θ0 of the point's
   ``optim.Problem`` (its scaled variables): θ0ᵢ + σ·max(|θ0ᵢ|, floor)·zᵢ with z ~ N(0, 1) drawn from
-  ``numpy.random.default_rng([seed, i, k])``, written back into a spec with ``optim.writeback.to_spec``,
-  then ``optim.run.optimize`` runs unchanged. A start that cannot run (the perturbed lens is unusable,
+  ``numpy.random.default_rng([seed, i, k])``, written back into a spec with ``design.writeback.to_spec``,
+  then ``design.optimize`` runs unchanged. A start that cannot run (the perturbed lens is unusable,
   a solve fails) is recorded as failed with its reason.
 - Tasks: one per (point, start), serially or on Dask (``lensopt.parallel``); each sets torch to one
   thread, so a task's numbers do not depend on where it ran.
@@ -166,10 +166,9 @@ def perturbed_spec(spec: LensSpec, point: int, start: int, settings: Settings) -
         return spec
     import torch
 
-    from lensopt.optim.problem import Problem
-    from lensopt.optim.writeback import to_spec
+    from lensopt.design import build_problem, to_spec
 
-    problem = Problem(spec, seed=settings.seed)
+    problem = build_problem(spec, seed=settings.seed)
     theta0 = problem.theta0
     rng = np.random.default_rng([settings.seed, point, start])
     z = torch.from_numpy(rng.standard_normal(theta0.shape[0])).to(theta0)
@@ -215,18 +214,18 @@ def run_task(settings: Settings, task: Task) -> tuple[dict[str, Any], str | None
         torch.set_num_threads(threads)
 
 
-def optimize(spec: LensSpec, *, steps: int | None, seed: int):  # noqa: ANN201 - optim.run.optimize, by name
-    """``lensopt.optim.run.optimize`` (a module-level name, so that tests can count the calls)."""
-    from lensopt.optim.run import optimize as run_optimize
+def optimize(spec: LensSpec, *, steps: int | None, seed: int):  # noqa: ANN201 - design.optimize, by name
+    """``lensopt.design.optimize`` (a module-level name, so that tests can count the calls)."""
+    from lensopt.design import optimize as run_optimize
 
     return run_optimize(spec, steps=steps, seed=seed)
 
 
 def _final_merit(spec: LensSpec, settings: Settings) -> tuple[float, bool, str, float]:
     """(½‖ℓ‖² with the final weights, physical, reason, ESR of the optimization rays µm) of a lens."""
-    from lensopt.optim.problem import Problem
+    from lensopt.design import build_problem
 
-    problem = Problem(spec, seed=settings.seed)
+    problem = build_problem(spec, seed=settings.seed)
     ev = problem.evaluate(problem.theta0)
     if not ev.physical:
         return math.nan, False, ev.reason, math.nan

@@ -398,7 +398,7 @@ def test_optimize_is_bit_identical_with_1_and_2_threads() -> None:
     the fix, 6 LM steps on the Cooke problem already gave different radii with 1 and 2 threads."""
     import torch
 
-    from lensopt.optim import optimize
+    from lensopt.design import optimize
     from lensopt.spec import dump_json
 
     threads = torch.get_num_threads()

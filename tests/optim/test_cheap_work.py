@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lensopt.optim import Problem
+from lensopt.design import build_problem
 from lensopt.optim import residuals as terms
 from lensopt.optim.lm import damped_step
 from lensopt.spec import parse_spec
@@ -17,7 +17,7 @@ def test_failure_rows_without_the_walk_equal_the_walk(make_cooke, monkeypatch) -
     data = make_cooke(constraints={"ray_failure": {"penalty_mm": 2.0}})
     data["surfaces"][0]["vary"] = ["radius"]
     data["surfaces"][2]["vary"] = ["radius"]
-    p = Problem(parse_spec(data))
+    p = build_problem(parse_spec(data))
     assert p.failure_summary(p.theta0)[0] == 0  # the Cooke triplet passes every ray
     calls = []
     real_margin = terms.failure_margin

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 import torch
 
+from lensopt.design import build_problem
 from lensopt.optim import Problem
 from lensopt.optim.compiled_jacobian import CompiledJacobian, capture_jacobian
 from lensopt.spec import load_spec, parse_spec
@@ -26,7 +27,7 @@ def _small_problem(make_cooke) -> Problem:  # noqa: ANN001
     for s in (0, 2, 4):
         data["surfaces"][s]["vary"] = ["radius", "thickness"]
     data["system"]["field"]["relative"] = [0.0, 1.0]
-    return Problem(parse_spec(data))
+    return build_problem(parse_spec(data))
 
 
 def _rel(a: torch.Tensor, b: torch.Tensor) -> float:
@@ -81,7 +82,7 @@ def test_branch_on_theta_falls_back_to_eager(caplog) -> None:  # noqa: ANN001
 
 @pytest.mark.slow
 def test_inductor_compiled_jacobian_equals_eager_on_cooke() -> None:
-    p = Problem(load_spec(SPECS / "cooke_triplet_opt.toml"))
+    p = build_problem(load_spec(SPECS / "cooke_triplet_opt.toml"))
     jac = CompiledJacobian(p)
     J, r = jac(p.theta0)
     assert jac.compiled, jac.failed

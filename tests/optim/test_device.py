@@ -10,7 +10,7 @@ import torch
 from typer.testing import CliRunner
 
 from lensopt.cli import app
-from lensopt.optim import Problem, optimize
+from lensopt.design import build_problem, optimize
 from lensopt.optim.lm import damped_step
 from lensopt.spec import parse_spec, save_json
 
@@ -55,8 +55,8 @@ def test_bad_device_and_jacobian_names_are_one_line_and_exit_2(tmp_path: Path, m
 def _check_on(device: torch.device, make_cooke) -> None:  # noqa: ANN001
     """Every tensor the LM path touches lives on ``device``; the numbers equal the CPU problem's."""
     spec = _spec(make_cooke)
-    cpu = Problem(spec)
-    p = Problem(spec, device=device)
+    cpu = build_problem(spec)
+    p = build_problem(spec, device=device)
     assert p.theta0.device.type == device.type and p.pupil.device.type == device.type
     assert p.field_weights.device.type == device.type and p.row_scale(0.5).device.type == device.type
     lens, _ = p.lens(p.theta0)

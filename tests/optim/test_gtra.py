@@ -9,9 +9,10 @@ from pathlib import Path
 import pytest
 import torch
 
+from lensopt.design import build_problem
 from lensopt.errors import LensoptError
+from lensopt.optim import Problem
 from lensopt.optim.gtra import gtra_residual, gtra_target
-from lensopt.optim.problem import Problem
 from lensopt.spec import load_spec
 
 SPECS = Path(__file__).resolve().parents[2] / "specs"
@@ -25,7 +26,7 @@ def _problem(psf_size: int = 21, method: str = "lm", **image) -> Problem:
     settings = {"patch": 32, "batch": 2, "psf_size": psf_size, "fields": 3, "sampling": "rings:4", **image}
     opt = {"objective": "raw", "image": settings, "sampling": "rings:3", "rim_rays": 0}
     spec = spec.model_copy(update={"optimize": type(spec).model_fields["optimize"].annotation.__args__[0](**opt)})
-    return Problem(spec, method=method, image_dtype=torch.float64)
+    return build_problem(spec, method=method, image_dtype=torch.float64)
 
 
 def _gtra_rows(p: Problem, theta: torch.Tensor) -> torch.Tensor:
@@ -78,7 +79,7 @@ def test_raw_objective_without_a_sensor_is_a_one_line_error() -> None:
 
     spec = spec.model_copy(update={"optimize": OptimizeSpec(objective="raw")})
     with pytest.raises(LensoptError) as err:
-        Problem(spec)
+        build_problem(spec)
     assert err.value.path == "sensor"
 
 

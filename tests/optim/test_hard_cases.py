@@ -6,7 +6,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from lensopt.optim import OptimizeError, Problem, optimize
+from lensopt.design import build_problem, optimize
+from lensopt.optim import OptimizeError, Problem
 from lensopt.optim.run import make_optimizer
 from lensopt.spec import parse_spec
 
@@ -27,7 +28,7 @@ def test_a_variable_the_merit_does_not_see_stays_put(make_cooke) -> None:  # noq
     data["surfaces"].insert(4, {"type": "sphere", "radius": 100.0, "thickness": 3.0, "vary": ["radius"]})
     for i in (0, 2, 5):
         data["surfaces"][i]["vary"] = ["radius"]
-    p = Problem(parse_spec(data))
+    p = build_problem(parse_spec(data))
     J, _ = p.jacobian(p.theta0)
     norms = torch.linalg.vector_norm(J, dim=0)
     assert float(norms[2]) < 1e-12 * float(norms.max())  # the dummy really is invisible
@@ -44,7 +45,7 @@ def test_rank_deficient_jacobian_gives_finite_steps(make_cooke) -> None:  # noqa
     data["surfaces"].insert(2, {"type": "plane", "thickness": 3.00755, "vary": ["thickness"]})
     data["surfaces"][1]["vary"] = ["thickness"]
     data["surfaces"][0]["vary"] = ["radius"]
-    p = Problem(parse_spec(data))
+    p = build_problem(parse_spec(data))
     J, _ = p.jacobian(p.theta0)
     torch.testing.assert_close(J[:, 1], J[:, 2], rtol=1e-9, atol=1e-12)
     lm, infos = _steps(p, 12)
@@ -67,7 +68,7 @@ def test_a_start_with_many_failed_rays_recovers(make_cooke) -> None:  # noqa: AN
     # Each failed ray costs a constant plus how far it is from passing (S43-like margins), so LM pulls
     # the failed rays back through the lens.
     data = _failing_start(make_cooke, 3, 5.5)
-    p = Problem(parse_spec(data))
+    p = build_problem(parse_spec(data))
     start = p.evaluate(p.theta0)
     assert 0.3 < 1 - start.valid_fraction < 0.6
     result = optimize(parse_spec(data), steps=25)
@@ -100,7 +101,7 @@ def test_a_step_to_a_non_physical_lens_is_rejected(make_cooke) -> None:  # noqa:
     data = make_cooke(sampling="rings:3", constraints={"ray_path": {"gaps": [{"gap": 0, "max": -1.0}]}},
                       lm={"damping": 1e-2})
     data["surfaces"][0]["vary"] = ["thickness"]
-    p = Problem(parse_spec(data))
+    p = build_problem(parse_spec(data))
     lm = make_optimizer(p, p.theta0, "lm")
     one = torch.ones(p.size, dtype=torch.float64)
     reasons = []

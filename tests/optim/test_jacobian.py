@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from lensopt.optim import Problem
+from lensopt.design import build_problem
 from lensopt.spec import parse_spec
 
 
@@ -20,7 +20,7 @@ def test_forward_mode_jacobian_equals_reverse_mode_and_finite_differences(make_c
     }, solves=[{"type": "efl", "surface": -1, "value": 50.0}])
     data["surfaces"][0]["vary"] = ["radius", "thickness"]
     data["surfaces"][2]["vary"] = ["radius", "material"]
-    p = Problem(parse_spec(data))
+    p = build_problem(parse_spec(data))
     theta = p.theta0 + 1e-3 * torch.linspace(-1, 1, p.num_variables, dtype=torch.float64)
     J, r = p.jacobian(theta)
     torch.testing.assert_close(r, p.residuals(theta), rtol=0, atol=0)

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from lensopt.optim.lm import LevenbergMarquardt, Trial, damped_step
-from lensopt.spec.optim import LMSpec
+from lensopt.optim.settings import LMSettings
 
 
 def _rosenbrock(theta: torch.Tensor) -> torch.Tensor:
@@ -22,11 +22,11 @@ def _lm(fun, theta0, **settings) -> LevenbergMarquardt:  # noqa: ANN001
         return torch.func.jacfwd(fun)(t), fun(t)
 
     return LevenbergMarquardt(torch.tensor(theta0, dtype=torch.float64), jac,
-                              lambda t: Trial(fun(t), True), LMSpec(**settings))
+                              lambda t: Trial(fun(t), True), LMSettings(**settings))
 
 
 def test_table_s7_defaults() -> None:
-    s = LMSpec()
+    s = LMSettings()
     assert (s.damping, s.epsilon, s.beta, s.increase, s.decrease, s.tolerance) == (1.0, 1e-6, 0.99, 2.0, 3.0, 1.0)
 
 
@@ -105,7 +105,7 @@ def test_non_physical_steps_are_rejected() -> None:
     def evaluate(t: torch.Tensor) -> Trial:
         return Trial(fun(t), bool(t[0] >= 0), "" if t[0] >= 0 else "θ < 0: non-physical")
 
-    lm = LevenbergMarquardt(torch.tensor([2.0], dtype=torch.float64), jac, evaluate, LMSpec(damping=1e-6))
+    lm = LevenbergMarquardt(torch.tensor([2.0], dtype=torch.float64), jac, evaluate, LMSettings(damping=1e-6))
     one = torch.ones(3, dtype=torch.float64)
     first = lm.step(one)
     assert not first.accepted and first.reason == "θ < 0: non-physical"
@@ -152,7 +152,7 @@ def test_a_non_finite_jacobian_column_does_not_move_its_variable() -> None:
         return J, _rosenbrock(t)
 
     lm = LevenbergMarquardt(torch.tensor([-1.2, 1.0], dtype=torch.float64), jac,
-                            lambda t: Trial(_rosenbrock(t), True), LMSpec())
+                            lambda t: Trial(_rosenbrock(t), True), LMSettings())
     info = lm.step(torch.ones(2, dtype=torch.float64))
     assert info.accepted and math.isfinite(info.merit)
     assert float(lm.theta[0]) == -1.2 and float(lm.theta[1]) != 1.0

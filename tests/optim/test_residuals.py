@@ -8,8 +8,8 @@ import pytest
 import torch
 
 from lensopt.analysis.spot import spot_stats
+from lensopt.design import build_problem
 from lensopt.materials import material_from_name
-from lensopt.optim import Problem
 from lensopt.optim.rays import head
 from lensopt.spec import parse_spec
 
@@ -34,7 +34,7 @@ def test_tra_norm_is_the_effective_spot_radius(make_cooke) -> None:  # noqa: ANN
     data["spectrum"]["weights"] = [0.5, 1.0, 0.7]
     data["surfaces"][0]["vary"] = ["radius"]
     data["optimize"]["rim_rays"] = 0
-    p = Problem(parse_spec(data))
+    p = build_problem(parse_spec(data))
     lens, _ = p.lens(p.theta0)
     b = p.bundle(lens)
     stats = spot_stats(b, p.system.wavelength_weights, p.field_weights)
@@ -43,7 +43,7 @@ def test_tra_norm_is_the_effective_spot_radius(make_cooke) -> None:  # noqa: ANN
     assert r.shape[0] == 2 * b.result.status.numel()
     # The rim rays (for the geometric constraints) do not enter the spot terms.
     data["optimize"]["rim_rays"] = 7
-    with_rim = Problem(parse_spec(data))
+    with_rim = build_problem(parse_spec(data))
     assert with_rim.pupil.shape[0] == p.pupil.shape[0] + 7 + 1  # rim rays and the centre
     torch.testing.assert_close(with_rim.terms(with_rim.theta0)["tra"], r, rtol=0, atol=0)
 
@@ -51,7 +51,7 @@ def test_tra_norm_is_the_effective_spot_radius(make_cooke) -> None:  # noqa: ANN
 def test_ray_angle_residual_at_a_plane_face_has_the_closed_form() -> None:
     # At the plane first face every ray of the 30° field meets the surface at exactly 30°, refracting
     # to sin θ' = sin 30° / n_d. With θ_max = 20°: ΔζI = cos²20° − cos²30°, ΔζR = ramp(cos²20° − cos²θ').
-    p = Problem(parse_spec(_plate(ray_angle={"max_deg": 20.0})))
+    p = build_problem(parse_spec(_plate(ray_angle={"max_deg": 20.0})))
     r = p.terms(p.theta0)["ray_angle"]
     n_r = p.pupil.shape[0] * 2
     blocks = r.view(4, 2, 1, -1) * math.sqrt(n_r)  # (interface × in/out, field, wavelength, pupil)
@@ -68,7 +68,7 @@ def test_ray_path_residual_in_the_glass_has_the_closed_form() -> None:
     # On axis the rays cross the plane face undeviated at height h and meet the back sphere at
     # z = 2 + sag(h), sag = c h²/(1 + √(1 − c²h²)), c = −1/50: t_z = 2 + sag. With glass_min = 1.95
     # the residual is ramp(1.95 − t_z)/√n_r.
-    p = Problem(parse_spec(_plate(ray_path={"glass_min": 1.95, "image_min": 0.0})))
+    p = build_problem(parse_spec(_plate(ray_path={"glass_min": 1.95, "image_min": 0.0})))
     r = p.terms(p.theta0)["ray_path"]
     n_r = p.pupil.shape[0] * 2
     glass_rows = r.view(2, 2, 1, -1)[0, 0, 0] * math.sqrt(n_r)  # gap 0, field 0
@@ -83,7 +83,7 @@ def test_edge_bounds_follow_the_centre_thickness() -> None:
     # glass_ratio 3: CT/3 ≤ t_z ≤ 3 CT; a thin 0.6 mm plate gives bounds [0.2, 1.8] besides glass_min.
     data = _plate(ray_path={"glass_min": 0.1, "glass_ratio": 3.0, "air_min": 0.25, "image_min": 5.0})
     data["surfaces"][0]["thickness"] = 0.6
-    p = Problem(parse_spec(data))
+    p = build_problem(parse_spec(data))
     lo, hi = p.gap_bounds(p.lens(p.theta0)[0])
     assert lo.tolist() == pytest.approx([0.2, 5.0])
     assert hi[0].item() == pytest.approx(1.8)
@@ -94,7 +94,7 @@ def test_distortion_and_failure_terms(make_cooke) -> None:  # noqa: ANN001
 
     data = make_cooke(constraints={"distortion": {"max_percent": 0.05}, "ray_failure": {"penalty_mm": 2.0}})
     data["surfaces"][0]["vary"] = ["radius"]
-    p = Problem(parse_spec(data))
+    p = build_problem(parse_spec(data))
     lens, _ = p.lens(p.theta0)
     b = head(p.bundle(lens), p.num_spot)  # the spot sample, without the rim rays
     d = distortion(lens, p.system, b, spot_stats(b, p.system.wavelength_weights, p.field_weights))
@@ -109,7 +109,7 @@ def test_failed_rays_cost_a_constant_plus_their_margin() -> None:
     # each costs penalty (1 + h²/sd² − 1)/√n_r = penalty h²/sd²/√n_r (the clipped margin), the others 0.
     data = _plate(ray_failure={"penalty_mm": 3.0})
     data["surfaces"][1].update({"semi_diameter": 2.0, "clip": True})
-    p = Problem(parse_spec(data))
+    p = build_problem(parse_spec(data))
     lens, _ = p.lens(p.theta0)
     b = p.bundle(lens)
     r = p.terms(p.theta0)["ray_failure"].view(b.result.status.shape)
@@ -128,7 +128,7 @@ def test_ray_path_span_sums_the_gaps_it_covers() -> None:
     # { first = 0, min = 62.5 } costs (62.5 − 62)/√n_r per ray, and a span of surface 0 → 1 (the glass
     # alone) with max = 1.9 costs ramp(t_z − 1.9) with t_z = 2 + sag(h) as in the glass test above.
     spans = [{"first": 0, "min": 62.5}, {"first": 0, "to": 1, "max": 1.9}, {"first": -2, "max": 70.0}]
-    p = Problem(parse_spec(_plate(ray_path={"image_min": 0.0, "spans": spans})))
+    p = build_problem(parse_spec(_plate(ray_path={"image_min": 0.0, "spans": spans})))
     r = p.terms(p.theta0)["ray_path"]
     n_r = p.pupil.shape[0] * 2
     per_gap, span_rows = r[: 2 * n_r], r[2 * n_r:].view(3, 2, 1, -1) * math.sqrt(n_r)
@@ -145,8 +145,8 @@ def test_ray_path_span_errors_name_the_field() -> None:
     from lensopt.errors import SpecError
 
     with pytest.raises(SpecError, match=r"ray_path\.spans\[0\]\.first: no such surface"):
-        Problem(parse_spec(_plate(ray_path={"spans": [{"first": 5, "min": 1.0}]})))
+        build_problem(parse_spec(_plate(ray_path={"spans": [{"first": 5, "min": 1.0}]})))
     with pytest.raises(SpecError, match=r"ray_path\.spans\[0\]\.to: `to` must come after"):
-        Problem(parse_spec(_plate(ray_path={"spans": [{"first": 1, "to": 0, "min": 1.0}]})))
+        build_problem(parse_spec(_plate(ray_path={"spans": [{"first": 1, "to": 0, "min": 1.0}]})))
     with pytest.raises(SpecError, match=r"spans\[0\]\.min: a span needs a min or a max"):
         parse_spec(_plate(ray_path={"spans": [{"first": 1}]}))

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from lensopt.analysis.report import trace_report
+from lensopt.design import optimize
 from lensopt.optics.sampling import PupilSampling
-from lensopt.optim import optimize
 from lensopt.spec import build, load_spec, parse_spec
 
 SPECS = Path(__file__).resolve().parents[2] / "specs"

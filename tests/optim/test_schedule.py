@@ -17,12 +17,12 @@ def test_piecewise_exponential_schedule() -> None:
 
 
 def test_group_weight_schedules_scale_their_rows(make_cooke) -> None:  # noqa: ANN001
-    from lensopt.optim import Problem
+    from lensopt.design import build_problem
     from lensopt.spec import parse_spec
 
     data = make_cooke(constraints={"ray_angle": {"weight": 2.0, "schedule": [[0.5, 0.01], [0.75, 1.0]]}})
     data["surfaces"][0]["vary"] = ["radius"]
-    p = Problem(parse_spec(data))
+    p = build_problem(parse_spec(data))
     rows = p.slices["ray_angle"]
     assert float(p.row_scale(0.2)[rows][0]) == pytest.approx(0.01)
     assert float(p.row_scale(0.625)[rows][0]) == pytest.approx(0.1)  # geometric midpoint

@@ -7,6 +7,7 @@ import math
 import pytest
 import torch
 
+from lensopt.design import build_problem
 from lensopt.errors import SpecError
 from lensopt.optics.paraxial import first_order, trace_paraxial
 from lensopt.optim import Problem
@@ -18,7 +19,7 @@ def _problem(cooke: dict, solves: list[dict], defocus: float = 0.0) -> Problem:
     cooke["surfaces"][4]["vary"] = ["radius"]
     cooke["optimize"]["solves"] = solves
     cooke["image"] = {"defocus": defocus}
-    return Problem(parse_spec(cooke))
+    return build_problem(parse_spec(cooke))
 
 
 def _perturbed(p: Problem) -> torch.Tensor:
@@ -82,7 +83,7 @@ def test_solve_errors_name_the_field(cooke: dict) -> None:
     cooke["surfaces"][0]["vary"] = ["thickness"]
     cooke["optimize"]["solves"] = [{"type": "image_height", "surface": 1, "value": 10.0}]
     with pytest.raises(SpecError, match=r"optimize\.solves\[0\]\.surface: an image_height solve must act"):
-        Problem(parse_spec(cooke))
+        build_problem(parse_spec(cooke))
     cooke["optimize"]["solves"] = [{"type": "ttl", "value": 60.0}, {"type": "focus"}]
     with pytest.raises(SpecError, match=r"optimize\.solves\[1\]: only one solve"):
         parse_spec(cooke)

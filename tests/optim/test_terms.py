@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import torch
 
+from lensopt.design import build_problem
 from lensopt.optim import Problem
 from lensopt.optim.terms import TERMS, Term, register_term
 from lensopt.spec import parse_spec
@@ -13,12 +14,12 @@ from lensopt.spec import parse_spec
 def test_a_registered_term_joins_the_residuals_with_its_weight(cooke) -> None:  # noqa: ANN001
     cooke["surfaces"][0]["vary"] = ["radius"]
     spec = parse_spec(cooke)
-    base = Problem(spec)
+    base = build_problem(spec)
     term = Term("centre_height", "test: y of each field's centroid", lambda p: 3.0,
                 lambda c: c.stats.centroid[:, 1])
     register_term(term, after="tra")
     try:
-        p = Problem(spec)
+        p = build_problem(spec)
         names = list(p.slices)
         assert names[names.index("tra") + 1] == "centre_height"
         parts = p.terms(p.theta0)
@@ -27,7 +28,7 @@ def test_a_registered_term_joins_the_residuals_with_its_weight(cooke) -> None:  
         assert p.size == base.size + len(spec.system.field.relative)
     finally:
         del TERMS["centre_height"]
-    assert "centre_height" not in Problem(spec).slices
+    assert "centre_height" not in build_problem(spec).slices
 
 
 def _centroids(p: Problem) -> torch.Tensor:

@@ -13,11 +13,12 @@ import torch
 from typer.testing import CliRunner
 
 from lensopt.cli import app
+from lensopt.design import build_problem
+from lensopt.design.joint_run import run_joint
 from lensopt.io.checkpoint import load_checkpoint
+from lensopt.optim import Problem
 from lensopt.optim.gtra import gtra_residual
 from lensopt.optim.joint import RestoredObjective
-from lensopt.optim.joint_run import run_joint
-from lensopt.optim.problem import Problem
 from lensopt.restore import ConditionedRestorer, RestoreConfig
 from lensopt.spec import parse_spec
 
@@ -28,20 +29,20 @@ TINY = RestoreConfig(width=4, encoder_blocks=(1, 1), middle_blocks=1, decoder_bl
 
 def _objective(noise: float = 0.0, psf_size: int = 9) -> tuple[Problem, RestoredObjective, ConditionedRestorer]:
     spec = parse_spec(joint_data(noise=noise, psf_size=psf_size))
-    problem = Problem(spec, method="lm")
+    problem = build_problem(spec, method="lm")
     torch.manual_seed(0)
     net = ConditionedRestorer(TINY).double()
     with torch.no_grad():  # away from the identity initialisation, so that every stage matters
         for p in net.parameters():
             p.add_(0.1 * torch.randn_like(p))
         net.gate.fill_(0.5)
-    obj = RestoredObjective(problem.spec, problem.system, spec.optimize.image, net, dtype=torch.float64)
+    obj = RestoredObjective(problem.setup.camera, problem.opt.image, net, dtype=torch.float64)
     return problem, obj, net
 
 
 def test_restored_loss_gradient_wrt_a_curvature_equals_central_differences() -> None:
     problem, obj, net = _objective()
-    lens0 = problem.model.lens
+    lens0 = problem.setup.lens
 
     def f(c1: torch.Tensor) -> torch.Tensor:
         curv = torch.cat([lens0.curvature[:1], c1.reshape(1), lens0.curvature[2:]])
@@ -63,7 +64,7 @@ def test_restored_loss_gradient_wrt_a_curvature_equals_central_differences() -> 
 def test_gtra_of_the_restored_loss_reproduces_loss_and_gradient() -> None:
     # S66: at θ₀, ½‖ℓ_GTRA‖² = L and ∂/∂ε of ½‖ℓ_GTRA‖² = ∇_ε L (no clipping at this size).
     problem, obj, net = _objective(psf_size=25)
-    lens = problem.model.lens
+    lens = problem.setup.lens
     t = obj.update(lens)
     assert t.clipped == 0
     with torch.no_grad():

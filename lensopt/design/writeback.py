@@ -1,5 +1,5 @@
-"""θ → spec: write optimized (and solved) values back into a ``LensSpec``, and bind glass variables to
-their nearest catalog glasses (S4.1.3), by name."""
+"""θ → spec: write optimized (and solved) values back into the ``LensSpec`` a problem was built from
+(``SpecProblem.spec``), and bind glass variables to their nearest catalog glasses (S4.1.3), by name."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from lensopt.design.setup import SpecProblem
 from lensopt.errors import LensoptError
 from lensopt.materials import find_glass
 from lensopt.materials.glass_space import nearest_glass
-from lensopt.optim.problem import Problem
 from lensopt.spec.models import DiffractiveSurface, LensSpec, ModelGlassSpec
 
 __all__ = ["BoundGlass", "to_spec", "bind_glasses"]
@@ -39,7 +39,7 @@ class BoundGlass:
     distance: float
 
 
-def to_spec(problem: Problem, theta: Tensor, materials: dict[int, str | ModelGlassSpec] | None = None,
+def to_spec(problem: SpecProblem, theta: Tensor, materials: dict[int, str | ModelGlassSpec] | None = None,
             *, freeze_glass: bool = False) -> LensSpec:
     """The spec with every varied or solved quantity set from θ.
 
@@ -85,7 +85,7 @@ def to_spec(problem: Problem, theta: Tensor, materials: dict[int, str | ModelGla
     return spec
 
 
-def bind_glasses(problem: Problem, theta: Tensor) -> tuple[LensSpec, list[BoundGlass]]:
+def bind_glasses(problem: SpecProblem, theta: Tensor) -> tuple[LensSpec, list[BoundGlass]]:
     """Bind every glass variable to its nearest catalog glass (whitened distance) and freeze it.
 
     Returns the spec for the next phase (materials by name, ``material`` out of ``vary``) and what

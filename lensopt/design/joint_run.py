@@ -14,6 +14,8 @@ from typing import Any
 
 import torch
 
+from lensopt.design.setup import build_problem
+from lensopt.design.writeback import to_spec
 from lensopt.errors import LensoptError
 from lensopt.io.checkpoint import (
     Checkpoint,
@@ -28,8 +30,7 @@ from lensopt.io.checkpoint import (
 from lensopt.optim.irm import log_examples, make_optimizer
 from lensopt.optim.joint import Dist, RestoredObjective, evaluate_pair, joint_step
 from lensopt.optim.lm import LevenbergMarquardt, Trial
-from lensopt.optim.problem import Problem
-from lensopt.optim.writeback import to_spec
+from lensopt.optim.settings import ImageSettings
 from lensopt.restore.config import RestoreConfig, TrainConfig
 from lensopt.restore.model import ConditionedRestorer
 from lensopt.spec.restore import configs_from_spec
@@ -115,7 +116,7 @@ def run_joint(
     total = steps if steps is not None else spec.optimize.steps
     ck_every = cfg.checkpoint_every if checkpoint_every is None else checkpoint_every
     val_every = cfg.validate_every if validate_every is None else validate_every
-    problem = Problem(spec, seed=seed, method="lm")
+    problem = build_problem(spec, seed=seed, method="lm")
     if problem.num_variables == 0:
         raise LensoptError("nothing to optimize: no surface has a vary list", path="surfaces")
     torch.manual_seed(seed)
@@ -126,7 +127,8 @@ def run_joint(
         from torch.nn.parallel import DistributedDataParallel
 
         model = DistributedDataParallel(net)
-    obj = RestoredObjective(problem.spec, problem.system, spec.optimize.image, model, dist=dist, device=device)
+    obj = RestoredObjective(problem.setup.camera, problem.opt.image or ImageSettings(), model, dist=dist,
+                            device=device)
     problem.image = obj
 
     def evaluate_fn(t: torch.Tensor) -> Trial:
