@@ -55,7 +55,7 @@ def test_train_irm_writes_layout_scalars_psfs_and_restored_crops(tiny_lens: Path
 
 
 def test_joint_run_writes_layout_scalars_psfs_and_restored_crops(tmp_path: Path) -> None:
-    from lensopt.optim.joint_run import run_joint
+    from lensopt.design.joint_run import run_joint
 
     tb = tmp_path / "tb"
     run_joint(parse_spec(joint_data(steps=2)), steps=2, evaluate=False, log_dir=tb, validate_every=2)
