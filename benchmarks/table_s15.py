@@ -68,6 +68,11 @@ def write_inputs(work: Path, a: argparse.Namespace) -> dict[str, Path]:
     spec = restored.model_copy(update={"optimize": opt, "restore": rest})
     out["restored_start"] = work / "cmount_4p_restored_start.json"
     out["restored_start"].write_text(spec.model_dump_json(indent=1, exclude_none=True))
+    for seed in a.joint_seeds:  # the same run with other batches, held-out patches and network initialisation
+        o = opt.model_copy(update={"image": img.model_copy(update={"seed": seed})})
+        out[f"restored_start_seed{seed}"] = work / f"cmount_4p_restored_start_seed{seed}.json"
+        out[f"restored_start_seed{seed}"].write_text(
+            restored.model_copy(update={"optimize": o, "restore": rest}).model_dump_json(indent=1, exclude_none=True))
     for name, path in (("spot", "lenses/cmount_4p.json"), ("raw", "lenses/cmount_4p_raw.json")):
         lens = load_spec(ROOT / path)
         spectrum = lens.spectrum.model_copy(update={"rgb_weights": restored.spectrum.rgb_weights})
@@ -153,6 +158,22 @@ def train_extra_seeds(work: Path, files: dict[str, Path], a: argparse.Namespace)
             for p in (work / f"ck_{tag}", work / f"tb_{tag}"):
                 shutil.rmtree(p, ignore_errors=True)
             _wait([(tag, _run(cmd, work / f"{tag}.log"), time.perf_counter())], times)
+    return times
+
+
+def train_joint_seeds(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str, float]:
+    """The joint run again with other seeds (``[optimize.image] seed`` and ``--seed``)."""
+    times: dict[str, float] = {}
+    for seed in a.joint_seeds:
+        tag = f"restored_seed{seed}"
+        if _finished(work / f"ck_{tag}", a.steps):
+            continue
+        for p in (work / f"ck_{tag}", work / f"tb_{tag}"):
+            shutil.rmtree(p, ignore_errors=True)
+        cmd = _python() + ["optimize", str(files[f"restored_start_seed{seed}"]), "-o", str(work / f"{tag}.json"),
+                           "--checkpoint", str(work / f"ck_{tag}"), "--log-dir", str(work / f"tb_{tag}"),
+                           "--seed", str(seed)]
+        _wait([(tag, _run(cmd, work / f"{tag}.log"), time.perf_counter())], times)
     return times
 
 
@@ -249,6 +270,9 @@ def evaluate(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[
             ("restored", work / "restored.json", "ck_restored")]
     if (work / "ck_restored_irm").exists():
         todo.append(("restored_lens_irm", work / "restored.json", "ck_restored_irm"))
+    for seed in a.joint_seeds:
+        if (work / f"ck_restored_seed{seed}").exists():
+            todo.append((f"restored_seed{seed}", work / f"restored_seed{seed}.json", f"ck_restored_seed{seed}"))
     for seed in a.extra_seeds:
         for name in ("spot", "raw"):
             if (work / f"ck_{name}_seed{seed}").exists():
@@ -285,6 +309,8 @@ def main() -> None:
     p.add_argument("--no-evaluate", action="store_true", help="train only")
     p.add_argument("--extra-seeds", type=int, nargs="*", default=[],
                    help="also train the spot and raw networks with these seeds (more rows)")
+    p.add_argument("--joint-seeds", type=int, nargs="*", default=[],
+                   help="also run the joint optimization with these seeds (batches, held-out set, network init)")
     p.add_argument("--control", action="store_true",
                    help="also train a fresh train-irm network for the restored lens (a fourth row)")
     p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results_table_s15.json")
@@ -297,6 +323,7 @@ def main() -> None:
     if a.control:
         times["restored_irm"] = train_control(a.work, a)
     times.update(train_extra_seeds(a.work, files, a))
+    times.update(train_joint_seeds(a.work, files, a))
     if a.no_evaluate:
         return
     rows = evaluate(a.work, files, a)
@@ -315,12 +342,15 @@ def main() -> None:
                                for x, y in (("spot", "raw"), ("raw", "restored"), ("spot", "restored"),
                                             ("spot", "restored_lens_irm"), ("restored_lens_irm", "restored"))
                                  + tuple((n, f"{n}_seed{s}") for s in a.extra_seeds for n in ("spot", "raw"))
+                                 + tuple(("restored", f"restored_seed{s}") for s in a.joint_seeds)
+                                 + tuple((f"raw_seed{s}", f"restored_seed{s}") for s in a.joint_seeds)
                                if x in rows and y in rows},
     }
     from lensopt.io.checkpoint import load_checkpoint
 
-    for name in ["restored", "spot", "raw", "restored_irm"] + [f"{n}_seed{s}" for s in a.extra_seeds
-                                                                for n in ("spot", "raw")]:
+    for name in (["restored", "spot", "raw", "restored_irm"] + [f"{n}_seed{s}" for s in a.extra_seeds
+                                                                 for n in ("spot", "raw")]
+                 + [f"restored_seed{s}" for s in a.joint_seeds]):
         if not (a.work / f"ck_{name}").exists():
             continue
         ck = load_checkpoint(a.work / f"ck_{name}")
