@@ -35,7 +35,7 @@ from lensopt.restore.config import RestoreConfig, TrainConfig
 from lensopt.restore.model import ConditionedRestorer
 from lensopt.spec.restore import configs_from_spec
 
-__all__ = ["JointResult", "prepare_spec", "run_joint"]
+__all__ = ["JointResult", "prepare_spec", "run_joint", "tensorboard_layout"]
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +51,22 @@ class JointResult:
     elapsed_s: float = 0.0
     notes: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
+
+
+def tensorboard_layout() -> dict[str, dict[str, list[Any]]]:
+    """The TensorBoard custom-scalars layout of a joint run (``SummaryWriter.add_custom_scalars``): one
+    category, each chart a multiline plot of the ``joint/…`` scalars written every step (the held-out
+    ``psnr_raw``/``psnr_restored`` at validation steps only)."""
+    return {"joint run (lens LM step + network Adam step)": {
+        "PSNR dB: training batch (restored) vs held-out raw and restored":
+            ["Multiline", ["joint/psnr_batch_db", "joint/psnr_raw", "joint/psnr_restored"]],
+        "losses: network MAE (Adam), restored MSE and merit (LM)":
+            ["Multiline", ["joint/mae", "joint/loss_restored_mse", "joint/merit"]],
+        "LM damping λ and step accepted": ["Multiline", ["joint/damping", "joint/accepted"]],
+        "ESR µm (spot size of the lens)": ["Multiline", ["joint/esr_um"]],
+        "Adam learning rate (cosine)": ["Multiline", ["joint/lr"]],
+        "step wall time s": ["Multiline", ["joint/wall_s"]],
+    }}
 
 
 def prepare_spec(spec: Any) -> tuple[Any, list[str]]:
@@ -176,6 +192,7 @@ def run_joint(
         from torch.utils.tensorboard import SummaryWriter
 
         writer = SummaryWriter(str(log_dir))
+        writer.add_custom_scalars(tensorboard_layout())
     count = spec.optimize.image.validation
     res = JointResult(spec=spec, steps=step, interrupted=False, notes=notes)
     if evaluate:
