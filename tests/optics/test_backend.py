@@ -37,6 +37,7 @@ def _fresh_counts():
     backend.reset_auto_counts()
 
 
+@pytest.mark.slow  # torch.compile of the C-mount bundle: 44 s with a cold Inductor cache (issue 14: ≤ 20 s a test)
 def test_compiled_bundle_equals_eager_to_1e12_mm_and_first_compile_is_reported_once(tmp_path, monkeypatch) -> None:
     model = build(load_spec(CMOUNT))
     lens, system = model.lens, model.system
@@ -167,6 +168,7 @@ def test_compiled_calls_get_one_fixed_shape_and_the_padding_is_cut_off(monkeypat
             assert torch.equal(ha.pos, hb.pos) and torch.equal(ha.cos2_out, hb.cos2_out)
 
 
+@pytest.mark.slow  # builds an AOT package: 32 s on a machine with none (issue 14: ≤ 20 s a test)
 def test_aot_package_equals_eager_to_1e12_mm_with_every_failure_reason() -> None:
     """An AOT package (``optics.aot``) of the lens that takes every code path of the trace (Newton on an
     asphere, a clipped hyperboloid, a diffractive surface; misses, TIR, Newton failures, clipping), with
