@@ -399,6 +399,7 @@ def main() -> None:
                                if x in rows and y in rows},
     }
     from lensopt.io.checkpoint import load_checkpoint
+    from lensopt.io.files import write_text_atomic
 
     for name in (["restored", "spot", "raw", "restored_irm", "restored_polished"]
                  + [f"{n}_seed{s}" for s in a.extra_seeds for n in ("spot", "raw")]
@@ -412,9 +413,7 @@ def main() -> None:
             "validation": [{k: h[k] for k in ("step", "psnr_raw", "psnr_restored") if k in h}
                            for h in hist if "psnr_restored" in h],
             "history_every_10th_step": [h for h in hist if h["step"] % 10 == 0]}
-    tmp = a.out.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(result, indent=1) + "\n")
-    os.replace(tmp, a.out)
+    write_text_atomic(a.out, json.dumps(result, indent=1) + "\n")
     print("| lens | ESR µm | dead leaves before → after (gain) | photos before → after (gain) |")
     print("|---|---:|---|---|")
     for name, r in rows.items():

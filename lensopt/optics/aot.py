@@ -36,6 +36,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
+from lensopt.io.files import atomic_path
 from lensopt.optics.intersect import NEWTON_ITERATIONS
 from lensopt.optics.lens import Lens
 from lensopt.optics.trace import Rays, RayTrace, SurfaceHit, trace
@@ -187,16 +188,9 @@ def build_package(lens: Lens, *, upto: int | None = None, record: bool = False,
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)  # torch-internal deprecations printed by export
         program = torch.export.export(_Flat(lens, upto, record, newton_iterations), _example(lens), strict=False)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".pt2")
-        os.close(fd)
-        try:
-            torch._inductor.aoti_compile_and_package(program, package_path=tmp,
+        with atomic_path(path) as tmp:
+            torch._inductor.aoti_compile_and_package(program, package_path=str(tmp),
                                                      inductor_configs={"max_fusion_size": _MAX_FUSION_SIZE})
-            os.chmod(tmp, 0o644)  # mkstemp makes it private; a package is an ordinary cache file
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
     _loaded.pop(path, None)
     _broken.discard(path)
     return time.perf_counter() - start

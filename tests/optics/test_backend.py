@@ -37,6 +37,17 @@ def _fresh_counts():
     backend.reset_auto_counts()
 
 
+def _assert_bundles_agree(eager, fast, ok: torch.Tensor) -> None:
+    """Two recorded bundles: identical statuses and failure surfaces, valid rays within 1e-12 mm on the
+    image and at every surface."""
+    assert torch.equal(eager.result.status, fast.result.status)
+    assert torch.equal(eager.result.failed_at, fast.result.failed_at)
+    assert (eager.result.pos - fast.result.pos)[ok].abs().max() < 1e-12
+    assert (eager.result.dir - fast.result.dir)[ok].abs().max() < 1e-12
+    for he, hc in zip(eager.result.hits, fast.result.hits, strict=True):
+        assert (he.pos - hc.pos)[ok].abs().max() < 1e-12
+
+
 @pytest.mark.slow  # torch.compile of the C-mount bundle: 44 s with a cold Inductor cache (issue 14: ≤ 20 s a test)
 def test_compiled_bundle_equals_eager_to_1e12_mm_and_first_compile_is_reported_once(tmp_path, monkeypatch) -> None:
     model = build(load_spec(CMOUNT))
@@ -55,12 +66,7 @@ def test_compiled_bundle_equals_eager_to_1e12_mm_and_first_compile_is_reported_o
         remove()
     ok = eager.result.valid
     assert ok.sum() > 0.9 * ok.numel()
-    assert torch.equal(eager.result.status, fast.result.status)
-    assert torch.equal(eager.result.failed_at, fast.result.failed_at)
-    assert (eager.result.pos - fast.result.pos)[ok].abs().max() < 1e-12
-    assert (eager.result.dir - fast.result.dir)[ok].abs().max() < 1e-12
-    for he, hc in zip(eager.result.hits, fast.result.hits, strict=True):
-        assert (he.pos - hc.pos)[ok].abs().max() < 1e-12
+    _assert_bundles_agree(eager, fast, ok)
     assert torch.equal(fast.result.pos, again.result.pos)
     # Reported once: the first compile of this structure, not the second call, and it is on disk.
     assert len(seen) == 1 and "9 surfaces" in seen[0][0] and seen[0][1] > 0
@@ -227,12 +233,7 @@ def test_aot_bundle_equals_eager_to_1e12_mm_on_the_cmount_lens() -> None:
         fast = trace_bundle(lens, system, pupil, half_pupil=True, record=True)  # auto: the package
     assert choose_backend(lens, 10**5, record=True) == "aot"
     ok = eager.result.valid
-    assert torch.equal(eager.result.status, fast.result.status)
-    assert torch.equal(eager.result.failed_at, fast.result.failed_at)
-    assert (eager.result.pos - fast.result.pos)[ok].abs().max() < 1e-12
-    assert (eager.result.dir - fast.result.dir)[ok].abs().max() < 1e-12
-    for he, hc in zip(eager.result.hits, fast.result.hits, strict=True):
-        assert (he.pos - hc.pos)[ok].abs().max() < 1e-12
+    _assert_bundles_agree(eager, fast, ok)
 
 
 def test_auto_sends_small_calls_to_a_package_only_once_it_is_loaded(tmp_path, monkeypatch) -> None:
