@@ -31,8 +31,12 @@ runner = CliRunner()
 
 
 @pytest.fixture(autouse=True)
-def _fresh_counts():
+def _fresh_counts(monkeypatch):
+    # Each test starts with auto knowing nothing of this process: no rays counted and no structure
+    # compiled by an earlier test (the slow compile tests would otherwise turn later auto choices to
+    # ``compiled`` when the file runs with ``-m "slow or not slow"``).
     backend.reset_auto_counts()
+    monkeypatch.setattr(backend, "_compiled_keys", set())
     yield
     backend.reset_auto_counts()
 
