@@ -276,11 +276,14 @@ class CompiledJacobian:
     def _build(self, theta: Tensor) -> None:
         key = self._package_key(theta)
         path = package_path(key) if key is not None else None
+        if path is not None and path in _broken:
+            self.failed = f"its package {path} failed earlier in this process"
+            return
         start = time.perf_counter()
         try:
-            if path is not None and path not in _broken and path.exists():
+            if path is not None and path.exists():
                 fn, self.source = _load(path), "package loaded"
-            elif path is not None and path not in _broken:
+            elif path is not None:
                 build_package(self.problem, theta, key)
                 fn, self.source = _load(path), "package built"
             else:
