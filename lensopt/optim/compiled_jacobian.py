@@ -156,7 +156,9 @@ def problem_key(problem: Problem) -> str | None:
         return None
     h = hashlib.sha256()
     try:
-        _feed(h, (problem.setup, problem.opt, problem.seed, problem.objective, current_backend(),
+        # Under a forward-mode transform ``auto`` traces eagerly (optics.backend): only ``compiled`` differs.
+        backend = "compiled" if current_backend() == "compiled" else "eager"
+        _feed(h, (problem.setup, problem.opt, problem.seed, problem.objective, backend,
                   str(problem.dtype), problem.device.type, torch.__version__, _library()))
     except (TypeError, AttributeError) as err:
         logger.info("compiled Jacobian: no package key (%s)", err)

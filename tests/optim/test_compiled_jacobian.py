@@ -116,6 +116,9 @@ def test_problem_key_follows_what_the_residual_function_is_made_of(make_cooke, m
     p = _small_problem(make_cooke)
     with use_backend("compiled"):  # the trace backend can change the captured graph
         assert problem_key(p) not in (key, None)
+    for name in ("eager", "auto"):  # under jacfwd, auto traces eagerly: one graph, one package
+        with use_backend(name):
+            assert problem_key(p) == key
 
 
 def test_problem_key_refuses_what_it_cannot_fingerprint(make_cooke) -> None:  # noqa: ANN001
