@@ -188,7 +188,8 @@ def register(app: typer.Typer) -> None:
         device: Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N | auto: where the optimization "
                                             "runs.")] = "cpu",
         jacobian: Annotated[str, typer.Option("--jacobian", help="eager | compiled (LM Jacobian; compiled: same "
-                                              "values, minutes to compile, faster steps).")] = "eager",
+                                              "values, faster steps; built once per problem and machine, "
+                                              "minutes, then loaded).")] = "eager",
         checkpoint: Annotated[Path | None, typer.Option("--checkpoint", help="restored: checkpoint folder.")] = None,
         resume: Annotated[bool, typer.Option("--resume", help="restored: continue --checkpoint.")] = False,
         log_dir: Annotated[Path | None, typer.Option("--log-dir", help="restored: TensorBoard folder.")] = None,

@@ -16,8 +16,9 @@ Backends:
   keyed by a digest of everything the residual function is built from (``problem_key``: the problem's
   setup — lens, system, media, variables, solves, settings —, its seed, the trace backend, the torch
   version and the source of the library). The first process builds it (capture + export + compile:
-  about a minute of CPU for the Cooke and C-mount problems); every later process with the same problem
-  loads it in milliseconds, with no capture and no compiler. A problem that cannot be keyed (an image
+  1.5–3 minutes of CPU, the C++ compiler included, for the Cooke and C-mount problems on the 2-core
+  development machine); every later process with the same problem loads it in milliseconds, with no
+  capture and no compiler (benchmarks/RESULTS.md, issue 14 session 22). A problem that cannot be keyed (an image
   objective, whose residual function changes with every batch; an object the digest does not know) is
   compiled in process (``inductor``).
 - ``inductor``: the captured graph handed to Inductor in this process (``torch._inductor.compile``); paid
