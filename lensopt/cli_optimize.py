@@ -213,7 +213,7 @@ def register(app: typer.Typer) -> None:
                                      device=device, log_dir=log_dir, quiet=quiet, as_json=as_json)
         if jacobian == "compiled" and not quiet:
             err_console.print("compiled LM Jacobian: loaded from this machine's package for the problem, or built at "
-                              "the first step of each phase when there is none (about a minute of CPU; `lensopt "
+                              "the first step of each phase when there is none (minutes of CPU; `lensopt "
                               "warmup SPEC --jacobian` builds the first phase's ahead)", highlight=False)
         try:
             with LiveProgress(err_console, enabled=not quiet) as live:

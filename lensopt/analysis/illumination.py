@@ -26,8 +26,16 @@ THREE_RAY_PUPIL = ((1.0, 0.0), (0.0, -1.0), (0.0, 1.0))
 """Relative pupil points of the lateral, inferior and superior rays, in this order."""
 
 
-def _reference_field(bundle: Bundle) -> int:
-    return int(torch.argmin(bundle.rel_field.detach()))
+def _reference_field(bundle: Bundle) -> Tensor:
+    """(1,) index of the field closest to the axis, a tensor: no Python int and no indexing by a 0-d
+    tensor (both read a value out of the tensor, which a captured graph of the residuals,
+    ``optim.compiled_jacobian``, cannot do); use with ``index_select``."""
+    return torch.argmin(bundle.rel_field.detach()).reshape(1)
+
+
+def _at(values: Tensor, ref: Tensor) -> Tensor:
+    """``values[ref]`` for the (1,) index of ``_reference_field``, broadcastable against (F,)."""
+    return values.index_select(0, ref)
 
 
 def relative_illumination_std(bundle: Bundle, wavelength_weights: Tensor) -> Tensor:
@@ -48,7 +56,7 @@ def relative_illumination_std(bundle: Bundle, wavelength_weights: Tensor) -> Ten
     b_std = std(res.dir[..., 1], zero_mean=False)
     ref = _reference_field(bundle)
     lit = valid.any(-1).any(-1)
-    r = a_std * b_std / (a_std[ref] * b_std[ref])
+    r = a_std * b_std / (_at(a_std, ref) * _at(b_std, ref))
     return torch.where(lit, r, torch.zeros_like(r))  # no ray through: no light (not sqrt(tiny)²)
 
 
@@ -62,6 +70,6 @@ def relative_illumination_three_ray(bundle: Bundle, wavelength: int) -> Tensor:
     alpha_l = d[:, 0, 0]
     beta_i, beta_s = d[:, 1, 1], d[:, 2, 1]
     ref = _reference_field(bundle)
-    r = alpha_l.abs() * (beta_i - beta_s).abs() / (2.0 * beta_s[ref] ** 2)
-    r = torch.where(ok & ok[ref], r, torch.full_like(r, math.nan))
+    r = alpha_l.abs() * (beta_i - beta_s).abs() / (2.0 * _at(beta_s, ref) ** 2)
+    r = torch.where(ok & _at(ok, ref), r, torch.full_like(r, math.nan))
     return torch.where(blocked, torch.zeros_like(r), r)

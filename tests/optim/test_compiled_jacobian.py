@@ -22,12 +22,19 @@ from lensopt.spec import load_spec, parse_spec
 SPECS = Path(__file__).resolve().parents[2] / "specs"
 
 
-def _small_problem(make_cooke) -> Problem:  # noqa: ANN001
-    data = make_cooke(constraints={"ray_failure": {"penalty_mm": 2.0}, "distortion": {"max_percent": 0.01}})
+def _small_data(make_cooke) -> dict:  # noqa: ANN001
+    # relative illumination held above 0.99: its rows are active, and it picks its reference field by
+    # index (once a Python int, which the capture cannot read out of a traced tensor)
+    data = make_cooke(constraints={"ray_failure": {"penalty_mm": 2.0}, "distortion": {"max_percent": 0.01},
+                                   "relative_illumination": {"min": 0.99}})
     for s in (0, 2, 4):
         data["surfaces"][s]["vary"] = ["radius", "thickness"]
     data["system"]["field"]["relative"] = [0.0, 1.0]
-    return build_problem(parse_spec(data))
+    return data
+
+
+def _small_problem(make_cooke) -> Problem:  # noqa: ANN001
+    return build_problem(parse_spec(_small_data(make_cooke)))
 
 
 def _rel(a: torch.Tensor, b: torch.Tensor) -> float:
@@ -38,6 +45,7 @@ def test_captured_graph_equals_eager_jacfwd(make_cooke) -> None:  # noqa: ANN001
     p = _small_problem(make_cooke)
     J0, r0 = p.jacobian(p.theta0)
     assert J0.shape == (p.size, 6) and bool((J0.abs().sum(0) > 0).all())
+    assert bool(J0[p.slices["relative_illumination"]].abs().sum() > 0)  # active, so compared below
     gm = capture_jacobian(p.residuals, p.theta0)
     J, r = gm(p.theta0)
     assert _rel(J, J0) <= 1e-12 and _rel(r, r0) <= 1e-12
@@ -98,10 +106,7 @@ def test_problem_key_follows_what_the_residual_function_is_made_of(make_cooke, m
 
     key = problem_key(_small_problem(make_cooke))
     assert key is not None and key == problem_key(_small_problem(make_cooke))  # rebuilt from the same spec
-    data = make_cooke(constraints={"ray_failure": {"penalty_mm": 2.0}, "distortion": {"max_percent": 0.01}})
-    for s in (0, 2, 4):
-        data["surfaces"][s]["vary"] = ["radius", "thickness"]
-    data["system"]["field"]["relative"] = [0.0, 1.0]
+    data = _small_data(make_cooke)
     assert problem_key(build_problem(parse_spec(data))) == key
     changed = []
     data["surfaces"][1]["radius"] *= 1.0 + 1e-12  # a fixed radius, changed in its last digits
