@@ -8,7 +8,9 @@
 2. Paraxial check of the start as written (EFL solve on the last radius applied here by bisection): EFL,
    back focus against the 12 mm working distance, axial focal shift per wavelength, marginal ray heights.
 
-    PYTHONPATH=. python benchmarks/microscope_start.py
+    PYTHONPATH=. python benchmarks/microscope_start.py [LENS.json]
+
+With a lens, also its paraxial axial focal shift per wavelength as written (e.g. lenses/microscope_8p_wd12.json).
 
 Thin-lens and paraxial numbers from the glasses' dispersion formulas; independent of the optimizer.
 """
@@ -17,12 +19,13 @@ from __future__ import annotations
 
 import itertools
 import math
+import sys
 
 import numpy as np
 import torch
 
 from lensopt.materials import design_catalog, material_from_name
-from lensopt.spec import load_spec
+from lensopt.spec import build, load_spec
 
 WL = np.array([400, 425, 450, 475, 500, 525, 550, 575, 600, 625, 650.0])
 W = np.array([0.0550, 0.0676, 0.0827, 0.1000, 0.1094, 0.0895, 0.0725, 0.0788, 0.1363, 0.1122, 0.0960])
@@ -55,12 +58,13 @@ def glass_pairs() -> list[tuple[float, float, str, str]]:
     return sorted(out)
 
 
-def paraxial(surfaces: list[tuple[float, float, str]], wl: int, h0: float) -> tuple[float, float, list[float]]:
-    """(EFL, BFL, heights) of a collimated marginal ray (height h0) through (radius, gap after, medium after)."""
+def paraxial(surfaces: list, wl: int, h0: float) -> tuple[float, float, list[float]]:
+    """(EFL, BFL, heights) of a collimated marginal ray (height h0) through (radius, gap after, medium after);
+    the medium is a glass name or an array of indices at WL."""
     y, u, n = h0, 0.0, 1.0
     hs = []
     for i, (r, t, m) in enumerate(surfaces):
-        n2 = float(indices(m)[wl])
+        n2 = float((indices(m) if isinstance(m, str) else m)[wl])
         u = (n * u - y * (n2 - n) / r) / n2
         n = n2
         hs.append(y)
@@ -100,5 +104,21 @@ def main() -> None:
     print("  marginal ray heights mm: " + " ".join(f"{h:.2f}" for h in hs))
 
 
+def lens_shift(path: str) -> None:
+    spec = load_spec(path)
+    model = build(spec)  # the indices as lensopt traces them (model glasses included)
+    assert [float(w) for w in spec.spectrum.wavelengths_nm] == WL.tolist()
+    index = model.lens.index.detach().numpy()
+    surfs = [[s.radius, s.thickness, index[i + 2]] for i, s in enumerate(spec.surfaces[1:])]
+    f, bfl, _ = paraxial(surfs, REF, 4.0)
+    shift = [paraxial(surfs, k, 4.0)[1] - bfl for k in range(len(WL))]
+    mean = sum(w * s for w, s in zip(W, shift, strict=True))
+    sd = math.sqrt(sum(w * (s - mean) ** 2 for w, s in zip(W, shift, strict=True)))
+    print(f"{path}: EFL {f:.4f} mm, BFL {bfl:.3f} mm; weighted spread of the focal shift {1e3 * sd:.1f} µm")
+    print("  axial focal shift µm at " + ", ".join(f"{w:.0f}: {1e3 * s:+.1f}" for w, s in zip(WL, shift, strict=True)))
+
+
 if __name__ == "__main__":
     main()
+    for lens in sys.argv[1:]:
+        lens_shift(lens)
