@@ -188,7 +188,8 @@ def register(app: typer.Typer) -> None:
         device: Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N | auto: where the optimization "
                                             "runs.")] = "cpu",
         jacobian: Annotated[str, typer.Option("--jacobian", help="eager | compiled (LM Jacobian; compiled: same "
-                                              "values, minutes to compile, faster steps).")] = "eager",
+                                              "values, faster steps; built once per problem and machine, "
+                                              "minutes, then loaded).")] = "eager",
         checkpoint: Annotated[Path | None, typer.Option("--checkpoint", help="restored: checkpoint folder.")] = None,
         resume: Annotated[bool, typer.Option("--resume", help="restored: continue --checkpoint.")] = False,
         log_dir: Annotated[Path | None, typer.Option("--log-dir", help="restored: TensorBoard folder.")] = None,
@@ -210,6 +211,10 @@ def register(app: typer.Typer) -> None:
 
             return optimize_restored(start_spec, output, steps=steps, seed=seed, checkpoint=checkpoint, resume=resume,
                                      device=device, log_dir=log_dir, quiet=quiet, as_json=as_json)
+        if jacobian == "compiled" and not quiet:
+            err_console.print("compiled LM Jacobian: loaded from this machine's package for the problem, or built at "
+                              "the first step of each phase when there is none (about a minute of CPU; `lensopt "
+                              "warmup SPEC --jacobian` builds the first phase's ahead)", highlight=False)
         try:
             with LiveProgress(err_console, enabled=not quiet) as live:
                 result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live,

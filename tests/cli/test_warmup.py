@@ -55,3 +55,40 @@ def test_warmup_of_a_decentered_lens_is_one_line_exit_2(tmp_path) -> None:
     r = runner.invoke(app, ["warmup", str(path)])
     assert r.exit_code == 2, r.output
     assert len(r.output.strip().splitlines()) == 1 and "decentered" in r.output
+
+
+def test_warmup_jacobian_builds_the_package_optimize_looks_for(tmp_path, monkeypatch) -> None:
+    """``--jacobian`` keys the package like ``optimize`` builds its problem (the same spec and seed), so that
+    ``optimize --jacobian compiled`` finds it; the build itself is a stand-in here (the slow test in
+    tests/optim/test_compiled_jacobian.py builds and loads a real one)."""
+    import torch
+
+    from lensopt.design import build_problem
+    from lensopt.optim import compiled_jacobian as cj
+    from lensopt.spec import load_spec
+
+    monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(aot, "build_package", lambda lens, **kw: 0.0)  # the trace packages are not the point
+    built: list[str] = []
+
+    def fake_build(problem, theta, key=None):  # type: ignore[no-untyped-def]
+        path = cj.package_path(key)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(b"stand-in")
+        built.append(key)
+        return path, 2.5
+
+    monkeypatch.setattr(cj, "build_package", fake_build)
+    spec = ROOT / "specs" / "cooke_triplet_opt.toml"
+    r = runner.invoke(app, ["warmup", str(spec), "--jacobian", "--seed", "3", "--json"])
+    assert r.exit_code == 0, r.output
+    row = json.loads(r.stdout)["packages"][-1]
+    # the problem as lensopt.design.optimize builds it for `optimize --seed 3`
+    problem = build_problem(load_spec(spec), seed=3, method="lm", device=torch.device("cpu"))
+    assert built == [cj.problem_key(problem)] and row["built_s"] == 2.5
+    assert Path(row["package"]) == cj.package_path(cj.problem_key(problem))
+    r = runner.invoke(app, ["warmup", str(spec), "--jacobian", "--seed", "3"])
+    assert r.exit_code == 0 and len(built) == 1 and "LM Jacobian" in r.output and "already compiled" in r.output
+    # A lens with nothing to vary has no optimization problem: one line, exit 2.
+    r = runner.invoke(app, ["warmup", str(ROOT / "specs" / "cooke_triplet.toml"), "--jacobian"])
+    assert r.exit_code == 2 and len(r.output.strip().splitlines()) == 1 and "nothing to optimize" in r.output

@@ -88,3 +88,110 @@ def test_inductor_compiled_jacobian_equals_eager_on_cooke() -> None:
     assert jac.compiled, jac.failed
     J0, r0 = p.jacobian(p.theta0)
     assert _rel(J, J0) <= 1e-12 and _rel(r, r0) <= 1e-12
+
+
+# ------------------------------------------------------------------------------ AOT packages per problem
+
+def test_problem_key_follows_what_the_residual_function_is_made_of(make_cooke, monkeypatch) -> None:  # noqa: ANN001
+    from lensopt.optics.backend import use_backend
+    from lensopt.optim.compiled_jacobian import problem_key
+
+    key = problem_key(_small_problem(make_cooke))
+    assert key is not None and key == problem_key(_small_problem(make_cooke))  # rebuilt from the same spec
+    data = make_cooke(constraints={"ray_failure": {"penalty_mm": 2.0}, "distortion": {"max_percent": 0.01}})
+    for s in (0, 2, 4):
+        data["surfaces"][s]["vary"] = ["radius", "thickness"]
+    data["system"]["field"]["relative"] = [0.0, 1.0]
+    assert problem_key(build_problem(parse_spec(data))) == key
+    changed = []
+    data["surfaces"][1]["radius"] *= 1.0 + 1e-12  # a fixed radius, changed in its last digits
+    changed.append(build_problem(parse_spec(data)))
+    data["surfaces"][1]["radius"] /= 1.0 + 1e-12
+    data["optimize"]["constraints"]["distortion"]["max_percent"] = 0.02
+    changed.append(build_problem(parse_spec(data)))
+    data["optimize"]["constraints"]["distortion"]["max_percent"] = 0.01
+    changed.append(build_problem(parse_spec(data), seed=1))  # another pupil jitter
+    keys = [problem_key(p) for p in changed]
+    assert None not in keys and len({key, *keys}) == 4
+    p = _small_problem(make_cooke)
+    with use_backend("compiled"):  # the trace backend can change the captured graph
+        assert problem_key(p) not in (key, None)
+    for name in ("eager", "auto"):  # under jacfwd, auto traces eagerly: one graph, one package
+        with use_backend(name):
+            assert problem_key(p) == key
+
+
+def test_problem_key_refuses_what_it_cannot_fingerprint(make_cooke) -> None:  # noqa: ANN001
+    import hashlib
+
+    from lensopt.optim.compiled_jacobian import _feed, problem_key
+
+    with pytest.raises(TypeError, match="cannot fingerprint"):
+        _feed(hashlib.sha256(), {"weight": lambda t: t})  # a callable could hold any state
+    p = _small_problem(make_cooke)
+    p.image = object()  # an image objective: its residual function changes with every batch
+    assert problem_key(p) is None
+
+
+def test_a_damaged_package_falls_back_to_eager(make_cooke, monkeypatch, tmp_path, caplog) -> None:  # noqa: ANN001
+    from lensopt.optim import compiled_jacobian as cj
+
+    monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
+    p = _small_problem(make_cooke)
+    path = cj.package_path(cj.problem_key(p))
+    assert path.parent == tmp_path / "lensopt_aot"
+    path.parent.mkdir(parents=True)
+    path.write_bytes(b"PK\x03\x04 not a package")  # truncated / foreign file under this problem's name
+    jac = CompiledJacobian(p)
+    with caplog.at_level(logging.WARNING, logger="lensopt.optim.compiled_jacobian"):
+        J, r = jac(p.theta0)
+    assert not jac.compiled and jac.failed and "eager" in caplog.text
+    J0, r0 = p.jacobian(p.theta0)
+    torch.testing.assert_close(J, J0, rtol=0, atol=0)
+    jac2 = CompiledJacobian(p)  # not tried again in this process: a second instance goes eager at once
+    J2, _ = jac2(p.theta0)
+    assert not jac2.compiled and "failed earlier" in jac2.failed
+    torch.testing.assert_close(J2, J0, rtol=0, atol=0)
+
+
+@pytest.mark.slow
+def test_aot_package_is_built_once_and_loaded_by_another_process(make_cooke, monkeypatch, tmp_path) -> None:  # noqa: ANN001
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from lensopt.optim import compiled_jacobian as cj
+
+    monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
+    p = _small_problem(make_cooke)
+    jac = CompiledJacobian(p)
+    J, r = jac(p.theta0)
+    assert jac.compiled and jac.source == "package built", jac.failed
+    J0, r0 = p.jacobian(p.theta0)
+    assert _rel(J, J0) <= 1e-12 and _rel(r, r0) <= 1e-12
+    theta = p.theta0 + 0.01 * torch.linspace(-1, 1, 6, dtype=torch.float64)
+    J1, r1 = p.jacobian(theta)
+    J2, r2 = jac(theta)
+    assert _rel(J1, J0) > 1e-4 and _rel(J2, J1) <= 1e-12 and _rel(r2, r1) <= 1e-12
+    assert cj.package_path(cj.problem_key(p)).exists()
+    # Another process with the same problem loads the package: no capture, no compile.
+    script = f"""
+import json, sys, torch
+sys.path.insert(0, {str(Path(__file__).parent)!r})
+from test_compiled_jacobian import _small_problem
+from conftest import cooke_data
+from lensopt.optim.compiled_jacobian import CompiledJacobian
+p = _small_problem(cooke_data)
+jac = CompiledJacobian(p)
+theta = p.theta0 + 0.01 * torch.linspace(-1, 1, 6, dtype=torch.float64)
+J, r = jac(theta)
+J0, r0 = p.jacobian(theta)
+print(json.dumps({{"source": jac.source, "failed": jac.failed,
+                   "dj": float((J - J0).abs().max() / J0.abs().max())}}))
+"""
+    env = {**os.environ, "TORCHINDUCTOR_CACHE_DIR": str(tmp_path)}
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert got["source"] == "package loaded" and not got["failed"] and got["dj"] <= 1e-12
