@@ -16,7 +16,8 @@ from lensopt.optim import Problem
 from lensopt.spec import build, load_spec
 
 SPECS = Path(__file__).resolve().parents[1] / "specs"
-STUDIES = ["telephoto_5p_tr080.toml", "telephoto_5p1_middle_tr075.toml", "microscope_8p_wd12.toml"]
+STUDIES = ["telephoto_5p_tr080.toml", "telephoto_5p1_middle_tr075.toml", "microscope_8p_wd12.toml",
+           "microscope_8p_wd12_alt.toml"]
 
 
 @pytest.fixture(scope="module", params=STUDIES)
