@@ -29,7 +29,7 @@ def register(app: typer.Typer) -> None:
         once per machine): later commands (trace, plot psf, simulate, evaluate) then load it in milliseconds
         and trace on it by default (--backend auto). Compiled: the plain trace, the recorded one, and the
         lens restricted to the wavelengths an RGB simulation uses when that is fewer. With --jacobian, also the
-        compiled LM Jacobian of each spec's optimization problem (about a minute of CPU; `optimize --jacobian
+        compiled LM Jacobian of each spec's optimization problem (minutes of CPU; `optimize --jacobian
         compiled` with the same spec and seed then loads it instead of compiling)."""
         from lensopt.errors import LensoptError
         from lensopt.optics import aot
