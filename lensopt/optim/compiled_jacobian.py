@@ -35,7 +35,9 @@ pupil sample, weights, the lens structure) become constants of the graph, which 
 problem. After a build or an in-process compile, the first call compares the compiled Jacobian and ℓ with
 eager jacfwd's (relative 1e-9 of the largest entry); after a package is loaded, ℓ with one eager residual
 evaluation (the Jacobian was checked when the package was built). On any failure the eager Jacobian is
-used from then on and a warning is logged (a package that fails is not used again in the process).
+used from then on and a warning is logged (a package that fails is not used again in the process; a build
+that fails leaves ``jacobian_<key>.failed`` beside the packages, so that later processes go eager at once
+instead of spending the build's minutes again — delete it to retry).
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from lensopt.io.files import atomic_path
+from lensopt.io.files import atomic_path, write_text_atomic
 from lensopt.optics import aot
 from lensopt.optics.backend import current_backend
 
@@ -282,12 +284,21 @@ class CompiledJacobian:
         if path is not None and path in _broken:
             self.failed = f"its package {path} failed earlier in this process"
             return
+        marker = path.with_suffix(".failed") if path is not None else None
+        if marker is not None and marker.exists() and not path.exists():
+            reason = marker.read_text(errors="replace").strip()
+            self.failed = f"building its package failed on this machine before ({reason}); delete {marker} to retry"
+            logger.warning("compiled Jacobian unavailable (%s); using the eager Jacobian", self.failed)
+            return
         start = time.perf_counter()
+        building = False
         try:
             if path is not None and path.exists():
                 fn, self.source = _load(path), "package loaded"
             elif path is not None:
+                building = True
                 build_package(self.problem, theta, key)
+                building = False
                 fn, self.source = _load(path), "package built"
             else:
                 gm = capture_jacobian(self.problem.residuals, theta)
@@ -314,6 +325,11 @@ class CompiledJacobian:
                 _broken.add(path)
                 _loaded.pop(path, None)
             self.failed = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
+            if building and marker is not None:  # a build that failed would fail again: remember it
+                try:
+                    write_text_atomic(marker, self.failed + "\n")
+                except OSError:
+                    pass
             logger.warning("compiled Jacobian unavailable (%s); using the eager Jacobian", self.failed)
             return
         self.build_s = 0.0 if self.source == "package loaded" else time.perf_counter() - start

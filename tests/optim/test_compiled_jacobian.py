@@ -200,3 +200,32 @@ print(json.dumps({{"source": jac.source, "failed": jac.failed,
     assert out.returncode == 0, out.stderr[-2000:]
     got = json.loads(out.stdout.strip().splitlines()[-1])
     assert got["source"] == "package loaded" and not got["failed"] and got["dj"] <= 1e-12
+
+
+def test_a_failed_build_is_remembered_across_processes(make_cooke, monkeypatch, tmp_path, caplog) -> None:  # noqa: ANN001
+    from lensopt.optim import compiled_jacobian as cj
+
+    monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
+    calls: list[str] = []
+
+    def failing_build(problem, theta, key=None):  # type: ignore[no-untyped-def]
+        calls.append(key)
+        raise RuntimeError("C++ compile error (stand-in)")
+
+    monkeypatch.setattr(cj, "build_package", failing_build)
+    p = _small_problem(make_cooke)
+    J0, _ = p.jacobian(p.theta0)
+    jac = CompiledJacobian(p)
+    J, _ = jac(p.theta0)
+    assert not jac.compiled and len(calls) == 1 and "stand-in" in jac.failed
+    torch.testing.assert_close(J, J0, rtol=0, atol=0)
+    marker = cj.package_path(cj.problem_key(p)).with_suffix(".failed")
+    assert "stand-in" in marker.read_text()
+    monkeypatch.setattr(cj, "_broken", set())  # as in a new process
+    with caplog.at_level(logging.WARNING, logger="lensopt.optim.compiled_jacobian"):
+        J, _ = CompiledJacobian(p)(p.theta0)
+    assert len(calls) == 1 and "delete" in caplog.text and str(marker) in caplog.text  # no second build
+    torch.testing.assert_close(J, J0, rtol=0, atol=0)
+    marker.unlink()  # deleted: the next process tries again
+    CompiledJacobian(p)(p.theta0)
+    assert len(calls) == 2
