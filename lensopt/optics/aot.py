@@ -42,6 +42,7 @@ from lensopt.optics.lens import Lens
 from lensopt.optics.trace import Rays, RayTrace, SurfaceHit, trace
 
 __all__ = ["AOT_CHUNK", "package_dir", "package_path", "has_package", "is_loaded", "mark_broken", "build_package",
+           "load_package", "unload_package",
            "aot_trace", "supported", "describe"]
 
 AOT_CHUNK = 1 << 14
@@ -117,12 +118,17 @@ def has_package(lens: Lens, *, upto: int | None = None, record: bool = False,
     return path not in _broken and path.exists()
 
 
+def unload_package(path: Path) -> None:
+    """Drop the loaded runner of ``path`` (a package rebuilt or found broken)."""
+    _loaded.pop(path, None)
+
+
 def mark_broken(lens: Lens, *, upto: int | None = None, record: bool = False,
                 newton_iterations: int = NEWTON_ITERATIONS) -> None:
     """Stop using this structure's package in this process (it failed to load or run)."""
     path = package_path(lens, upto=upto, record=record, newton_iterations=newton_iterations)
     _broken.add(path)
-    _loaded.pop(path, None)
+    unload_package(path)
 
 
 def is_loaded(lens: Lens, *, upto: int | None = None, record: bool = False,
@@ -191,12 +197,14 @@ def build_package(lens: Lens, *, upto: int | None = None, record: bool = False,
         with atomic_path(path) as tmp:
             torch._inductor.aoti_compile_and_package(program, package_path=str(tmp),
                                                      inductor_configs={"max_fusion_size": _MAX_FUSION_SIZE})
-    _loaded.pop(path, None)
+    unload_package(path)
     _broken.discard(path)
     return time.perf_counter() - start
 
 
-def _runner(path: Path) -> Any:
+def load_package(path: Path) -> Any:
+    """The loaded runner of the package at ``path`` (loaded once per process; ``.run(list of tensors)``).
+    Also used for the LM Jacobian's packages (``optim.compiled_jacobian``)."""
     runner = _loaded.get(path)
     if runner is None:
         # (package, model name, run single-threaded, runners, device index): the C++ loader, no Python
@@ -219,4 +227,4 @@ def aot_trace(lens: Lens, rays: Rays, *, upto: int | None = None, record: bool =
                 for v in (pos, dir))
     args = [getattr(lens, name).detach().contiguous() for name in _LENS_TENSORS]
     args += [pos, dir, torch.broadcast_to(rays.wavelength, (n,)).to(torch.long).contiguous()]
-    return _unflatten(_runner(path).run(args), record)
+    return _unflatten(load_package(path).run(args), record)

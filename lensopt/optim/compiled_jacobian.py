@@ -74,7 +74,6 @@ CHECK_RTOL = 1e-9
 
 _LIBRARY = Path(__file__).resolve().parents[1]
 _library_digest: str | None = None
-_loaded: dict[Path, Any] = {}
 _broken: set[Path] = set()
 
 
@@ -192,16 +191,13 @@ def build_package(problem: Problem, theta: Tensor, key: str | None = None) -> tu
         program = torch.export.export(gm, (theta,), strict=False)
         with atomic_path(path) as tmp:
             torch._inductor.aoti_compile_and_package(program, package_path=str(tmp))
-    _loaded.pop(path, None)
+    aot.unload_package(path)
     _broken.discard(path)
     return path, time.perf_counter() - start
 
 
 def _load(path: Path) -> Callable[[Tensor], tuple[Tensor, Tensor]]:
-    runner = _loaded.get(path)
-    if runner is None:
-        # the C++ loader (no Inductor import): (package, model name, single-threaded, runners, device index)
-        runner = _loaded[path] = torch._C._aoti.AOTIModelPackageLoader(str(path), "model", False, 1, -1)
+    runner = aot.load_package(path)
 
     def call(t: Tensor) -> tuple[Tensor, Tensor]:
         J, r = runner.run([t.contiguous()])
@@ -323,7 +319,7 @@ class CompiledJacobian:
         except Exception as err:  # noqa: BLE001 - any capture/compile/load failure falls back to eager
             if path is not None:
                 _broken.add(path)
-                _loaded.pop(path, None)
+                aot.unload_package(path)
             self.failed = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
             if building and marker is not None:  # a build that failed would fail again: remember it
                 try:
