@@ -1,5 +1,6 @@
-"""Write a copy of a lens whose constraint groups have no weight schedule (full weight from the first step),
-to continue an optimized lens without the restart of the schedules (issue 15, session 22).
+"""(Superseded by ``lensopt optimize LENS.json --full-weight``, session 23; kept for the session-22
+commands in RESULTS.md.) Write a copy of a lens whose constraint groups have no weight schedule (full weight
+from the first step), to continue an optimized lens without the restart of the schedules (issue 15, session 22).
 
 ``lensopt optimize LENS.json`` on a written lens restarts the spec's schedules (constraints at 1–10 % of their
 weight for the first half): the lens then drifts out of its constraints and, on the studies, LM can stall

@@ -190,6 +190,10 @@ def register(app: typer.Typer) -> None:
         jacobian: Annotated[str, typer.Option("--jacobian", help="eager | compiled (LM Jacobian; compiled: same "
                                               "values, faster steps; built once per problem and machine, "
                                               "minutes, then loaded).")] = "eager",
+        full_weight: Annotated[bool, typer.Option("--full-weight", help="No weight schedules: every constraint "
+                                                  "group at the weight its schedule ends on from the first "
+                                                  "step (to continue a written lens); the written lens keeps "
+                                                  "the schedules.")] = False,
         checkpoint: Annotated[Path | None, typer.Option("--checkpoint", help="restored: checkpoint folder.")] = None,
         resume: Annotated[bool, typer.Option("--resume", help="restored: continue --checkpoint.")] = False,
         log_dir: Annotated[Path | None, typer.Option("--log-dir", help="restored: TensorBoard folder.")] = None,
@@ -207,6 +211,9 @@ def register(app: typer.Typer) -> None:
         check_output(output)
         start_spec = load_spec(spec)
         if start_spec.optimize is not None and start_spec.optimize.objective == "restored":
+            if full_weight:
+                raise LensoptError("applies to the spot and raw objectives (restored has no weight schedules)",
+                                   path="--full-weight")
             from lensopt.cli_restore import optimize_restored
 
             return optimize_restored(start_spec, output, steps=steps, seed=seed, checkpoint=checkpoint, resume=resume,
@@ -218,7 +225,7 @@ def register(app: typer.Typer) -> None:
         try:
             with LiveProgress(err_console, enabled=not quiet) as live:
                 result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live,
-                                      device=device, jacobian=jacobian)
+                                      device=device, jacobian=jacobian, full_weight=full_weight)
         except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the first step: the best lens is the start lens
             with signals_deferred():
                 save_json(start_spec, output)

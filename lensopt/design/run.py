@@ -19,12 +19,14 @@ __all__ = ["optimize"]
 
 def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None = None, seed: int = 0,
              callback: Callable[[Progress], None] | None = None, device: str | torch.device | None = None,
-             jacobian: str = "eager") -> OptimizeResult:
+             jacobian: str = "eager", full_weight: bool = False) -> OptimizeResult:
     """Optimize ``spec`` (its ``vary`` lists and ``[optimize]`` section); ``result.spec`` is the optimized lens.
 
     Ctrl-C (KeyboardInterrupt) ends the run early; the result then holds the best lens so far.
     ``device``: where the problem's tensors live (default CPU); ``jacobian``: ``eager`` or
-    ``compiled`` (see ``lensopt.optim.run.make_optimizer``).
+    ``compiled`` (see ``lensopt.optim.run.make_optimizer``); ``full_weight``: no weight schedules, each
+    group at the weight its schedule ends on from the first step (``OptimizeSpec.at_full_weight``), for
+    continuing a written lens; the written lens keeps the spec's schedules.
 
     Raises:
         OptimizeError: nothing varies, or the start lens is not usable (the message says why).
@@ -33,6 +35,8 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
     if jacobian not in JACOBIANS:
         raise LensoptError(f"must be one of {', '.join(JACOBIANS)}", path="--jacobian", got=jacobian)
     opt0 = spec.optimize
+    if full_weight and opt0 is not None:
+        spec = spec.model_copy(update={"optimize": opt0.at_full_weight()})
     method = optimizer or (opt0.optimizer if opt0 is not None else "lm")
     problem = build_problem(spec, seed=seed, method=method, device=dev)
 
@@ -45,4 +49,7 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
 
     result = run_problem(problem, optimizer=method, steps=steps, callback=callback, jacobian=jacobian, bind=bind)
     result.spec = to_spec(result.problem, result.theta)
+    if full_weight and opt0 is not None and result.spec.optimize is not None:  # the schedules as written
+        result.spec.optimize = result.spec.optimize.model_copy(update={"tra": opt0.tra,
+                                                                       "constraints": opt0.constraints})
     return result

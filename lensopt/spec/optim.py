@@ -361,6 +361,22 @@ class OptimizeSpec(_Model):
             raise ValueError(f"expected rings:N, rings:N:nojitter or grid:N with N ≥ 1 (got {v!r})")
         return v.strip()
 
+    def at_full_weight(self) -> OptimizeSpec:
+        """A copy whose TRA and constraint groups have no ``schedule``: each group at the weight its schedule
+        ends on (``weight`` × the last knot's multiplier), in force from the first step. For continuing a
+        written lens, where a restarted schedule would relax the constraints it already meets.
+        ``glass_catalog`` keeps its schedule: it is the pull towards the catalog before binding."""
+
+        def settled(group: _Weighted) -> _Weighted:
+            if group.schedule is None:
+                return group
+            return group.model_copy(update={"weight": group.weight * group.schedule[-1][1], "schedule": None})
+
+        cons = self.constraints
+        groups = {name: settled(getattr(cons, name)) for name in type(cons).model_fields
+                  if isinstance(getattr(cons, name), _Weighted)}
+        return self.model_copy(update={"tra": settled(self.tra), "constraints": cons.model_copy(update=groups)})
+
     @model_validator(mode="after")
     def _one_solve_per_kind(self) -> OptimizeSpec:
         last_gap = [i for i, s in enumerate(self.solves) if s.type in ("ttl", "focus")]
