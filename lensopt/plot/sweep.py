@@ -1,5 +1,6 @@
 """Design-sweep figure (seed Figure S13's form): the best ESR of every grid point against the swept
-value, one line per combination of the other keys, every finished start as a faint dot."""
+value, one line per combination of the other keys, every finished start as a faint dot (a start above twice
+the best curve's maximum as a marker on the top edge, so that a stalled start does not flatten the curve)."""
 
 from __future__ import annotations
 
@@ -20,9 +21,18 @@ def sweep_figure(series: dict[str, list[tuple[float, float]]], starts: list[tupl
     """
     fig = new_figure(5.5, 3.8)
     ax = fig.add_subplot()
-    if starts:
-        xs, ys = zip(*starts, strict=True)
+    best = [y for pts in series.values() for _, y in pts]
+    top = 2.0 * max(best) if best else None  # starts far above the best curve (stalled ones) would flatten it
+    inside = [(x, y) for x, y in starts if top is None or y <= top]
+    above = [(x, y) for x, y in starts if top is not None and y > top]
+    if inside:
+        xs, ys = zip(*inside, strict=True)
         ax.scatter(xs, ys, s=12, color="0.55", alpha=0.35, lw=0, label="every start", zorder=1)
+    if above:
+        ax.scatter([x for x, _ in above], [0.97 * top] * len(above), s=18, marker="^", color="0.45", lw=0,
+                   label=f"{len(above)} start(s) above {top:.3g}, up to {max(y for _, y in above):.3g}", zorder=1)
+    if top is not None:
+        ax.set_ylim(0.0, top)
     for j, (label, pts) in enumerate(sorted(series.items())):
         pts = sorted(pts)
         x, y = zip(*pts, strict=True)
