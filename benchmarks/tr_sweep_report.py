@@ -25,6 +25,10 @@ from lensopt.spec import load_spec
 EFL_MM = 25.9  # the spec's TTL = TR × 25.9 mm (specs/telephoto_5p_tr080.toml header)
 
 
+def _falls(values: list[float]) -> bool:
+    return all(b < a for a, b in zip(values, values[1:], strict=False))
+
+
 def main(folder: str, out: str, continued: str | None = None) -> None:
     sweep = json.loads((Path(folder) / "sweep.json").read_text())
     rows = []
@@ -50,11 +54,10 @@ def main(folder: str, out: str, continued: str | None = None) -> None:
             print(f"    continued ({continued.format(i=i)}): ESR {more['esr_um_rings24']:.3f} µm, Table S8 failed: "
                   f"{more['requirements_failed']}")
     esr = [r["best_esr_um"] for r in rows]
-    monotone = all(b < a for a, b in zip(esr, esr[1:], strict=False))
+    monotone = _falls(esr)
     print(f"best ESR falls monotonically with TR: {monotone}")
     if continued:
-        more = [r["continued"]["esr_um"] for r in rows]
-        print(f"continued ESR falls monotonically with TR: {all(b < a for a, b in zip(more, more[1:], strict=False))}")
+        print(f"continued ESR falls monotonically with TR: {_falls([r['continued']['esr_um'] for r in rows])}")
     Path(out).write_text(json.dumps({"folder": folder, "settings": sweep.get("settings"), "rows": rows,
                                      "monotone_decreasing": monotone}, indent=1, ensure_ascii=False) + "\n")
 

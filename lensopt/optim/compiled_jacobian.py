@@ -196,6 +196,18 @@ def build_package(problem: Problem, theta: Tensor, key: str | None = None) -> tu
     return path, time.perf_counter() - start
 
 
+def _reason(err: Exception) -> str:
+    return f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
+
+
+def _remember_failed_build(marker: Path, err: Exception) -> None:
+    """Leave ``jacobian_<key>.failed`` (the reason) beside the packages: later processes go eager at once."""
+    try:
+        write_text_atomic(marker, _reason(err) + "\n")
+    except OSError:
+        pass
+
+
 def _load(path: Path) -> Callable[[Tensor], tuple[Tensor, Tensor]]:
     runner = aot.load_package(path)
 
@@ -287,14 +299,15 @@ class CompiledJacobian:
             logger.warning("compiled Jacobian unavailable (%s); using the eager Jacobian", self.failed)
             return
         start = time.perf_counter()
-        building = False
         try:
             if path is not None and path.exists():
                 fn, self.source = _load(path), "package loaded"
             elif path is not None:
-                building = True
-                build_package(self.problem, theta, key)
-                building = False
+                try:
+                    build_package(self.problem, theta, key)
+                except Exception as err:  # a build that failed would fail again: remember it
+                    _remember_failed_build(marker, err)
+                    raise
                 fn, self.source = _load(path), "package built"
             else:
                 gm = capture_jacobian(self.problem.residuals, theta)
@@ -320,12 +333,7 @@ class CompiledJacobian:
             if path is not None:
                 _broken.add(path)
                 aot.unload_package(path)
-            self.failed = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
-            if building and marker is not None:  # a build that failed would fail again: remember it
-                try:
-                    write_text_atomic(marker, self.failed + "\n")
-                except OSError:
-                    pass
+            self.failed = _reason(err)
             logger.warning("compiled Jacobian unavailable (%s); using the eager Jacobian", self.failed)
             return
         self.build_s = 0.0 if self.source == "package loaded" else time.perf_counter() - start

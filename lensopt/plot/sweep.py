@@ -4,6 +4,8 @@ the best curve's maximum as a marker on the top edge, so that a stalled start do
 
 from __future__ import annotations
 
+import math
+
 from matplotlib.figure import Figure
 
 from lensopt.plot.style import FIELD_COLORS, new_figure
@@ -22,16 +24,16 @@ def sweep_figure(series: dict[str, list[tuple[float, float]]], starts: list[tupl
     fig = new_figure(5.5, 3.8)
     ax = fig.add_subplot()
     best = [y for pts in series.values() for _, y in pts]
-    top = 2.0 * max(best) if best else None  # starts far above the best curve (stalled ones) would flatten it
-    inside = [(x, y) for x, y in starts if top is None or y <= top]
-    above = [(x, y) for x, y in starts if top is not None and y > top]
+    top = 2.0 * max(best) if best else math.inf  # starts far above the best curve (stalled ones) would flatten it
+    inside = [(x, y) for x, y in starts if y <= top]
+    above = [(x, y) for x, y in starts if y > top]
     if inside:
         xs, ys = zip(*inside, strict=True)
         ax.scatter(xs, ys, s=12, color="0.55", alpha=0.35, lw=0, label="every start", zorder=1)
     if above:
         ax.scatter([x for x, _ in above], [0.97 * top] * len(above), s=18, marker="^", color="0.45", lw=0,
                    label=f"{len(above)} start(s) above {top:.3g}, up to {max(y for _, y in above):.3g}", zorder=1)
-    if top is not None:
+    if best:
         ax.set_ylim(0.0, top)
     for j, (label, pts) in enumerate(sorted(series.items())):
         pts = sorted(pts)
