@@ -8,7 +8,7 @@ problems of specs/cooke_triplet_opt.toml and specs/cmount_4p.toml (start points)
 
 ``--compiled`` adds the compiled forward-mode Jacobian (``optim.compiled_jacobian``: make_fx of jacfwd,
 compiled by Inductor; ``--compiled-backend`` picks how) with its one-off capture + compile time (wall
-and this process's CPU time); ``--rows`` adds ``optim.row_jacobian`` (inactive ramp rows skipped);
+and this process's CPU time);
 every row also gives its cost in units of one eager residual evaluation measured in the same run.
 
 Prints a markdown table: median wall time per Jacobian, ratio to jacfwd, and the largest difference
@@ -56,7 +56,7 @@ def _cpu_with_children() -> float:
 
 
 def bench(spec_name: str, repeats: int, jacrev_max_rows: int, compiled: bool = False, fd: bool = True,
-          backend: str = "inductor", rows_skipped: bool = False) -> dict:
+          backend: str = "inductor") -> dict:
     p = build_problem(load_spec(SPECS / spec_name))
     theta = p.theta0
     N, M = p.num_variables, p.size
@@ -84,8 +84,9 @@ def bench(spec_name: str, repeats: int, jacrev_max_rows: int, compiled: bool = F
     rows = {}
     t_res, _ = _time(lambda: p.residuals(theta).detach(), repeats)
     rows["one residual evaluation"] = (t_res, None)
-    t_fwd, J = _time(lambda: p.jacobian(theta)[0], repeats)
+    t_fwd, J = _time(lambda: p.jacobian_jacfwd(theta)[0], repeats)
     rows["jacfwd (forward mode)"] = (t_fwd, J)
+    rows["forward mode in stages (Problem.jacobian)"] = _time(lambda: p.jacobian(theta)[0], repeats)
     extra = {}
     if compiled:
         from torch.fx.experimental.proxy_tensor import make_fx  # noqa: F401 - imported before the clock
@@ -106,12 +107,8 @@ def bench(spec_name: str, repeats: int, jacrev_max_rows: int, compiled: bool = F
         # that a change of machine load during the compile does not bias the ratios.
         t_res, _ = _time(lambda: p.residuals(theta).detach(), repeats)
         rows["one residual evaluation"] = (t_res, None)
-        t_fwd, J = _time(lambda: p.jacobian(theta)[0], repeats)
+        t_fwd, J = _time(lambda: p.jacobian_jacfwd(theta)[0], repeats)
         rows["jacfwd (forward mode)"] = (t_fwd, J)
-    if rows_skipped:
-        from lensopt.optim.row_jacobian import row_jacobian
-
-        rows["jacfwd, inactive ramp rows skipped (row_jacobian)"] = _time(lambda: row_jacobian(p, theta)[0], repeats)
     if M <= jacrev_max_rows:
         rows["jacrev (reverse mode)"] = _time(lambda: torch.func.jacrev(p.residuals)(theta), max(1, repeats // 2))
     if fd:
@@ -135,7 +132,6 @@ def main() -> None:
     ap.add_argument("--no-fd", action="store_true", help="skip the finite-difference rows")
     ap.add_argument("--compiled-backend", choices=["aot", "inductor", "dynamo", "graph"], default="aot",
                     help="how --compiled compiles the captured graph (CompiledJacobian's backend)")
-    ap.add_argument("--rows", action="store_true", help="add row_jacobian (inactive ramp rows skipped)")
     ap.add_argument("--clock", choices=["wall", "cpu"], default="wall",
                     help="time each call by wall time or by this process's CPU time (load-robust)")
     ap.add_argument("--specs", default="cooke_triplet_opt.toml,cmount_4p.toml")
@@ -152,8 +148,7 @@ def main() -> None:
         "problems": [],
     }
     for spec in args.specs.split(","):  # each table printed as soon as it is measured
-        prob = bench(spec, args.repeats, args.jacrev_max_rows, args.compiled, not args.no_fd, args.compiled_backend,
-                     args.rows)
+        prob = bench(spec, args.repeats, args.jacrev_max_rows, args.compiled, not args.no_fd, args.compiled_backend)
         results["problems"].append(prob)
         print(f"\n{prob['spec']}: N = {prob['variables']} variables, M = {prob['residuals']} residuals")
         if "compile_s" in prob:

@@ -12,8 +12,9 @@ import torch
 from torch import Tensor
 
 from lensopt.optics.bundle import Bundle
+from lensopt.optics.lens import Lens, System
 
-__all__ = ["SpotStats", "spot_stats", "safe_sqrt"]
+__all__ = ["SpotStats", "spot_stats", "safe_sqrt", "seed_esr", "SEED_FIELDS", "SEED_SAMPLING"]
 
 
 def safe_sqrt(x: Tensor) -> Tensor:
@@ -77,3 +78,23 @@ def spot_stats(bundle: Bundle, wavelength_weights: Tensor, field_weights: Tensor
         field_weights = torch.ones_like(sr_h)
     esr = safe_sqrt((field_weights * sr_h**2).sum() / field_weights.sum())
     return SpotStats(c_h, sr_h, c_hw, sr_hw, esr, valid.sum(-1))
+
+
+SEED_FIELDS = 11
+"""Relative fields of the seed's ESR: 0, 0.1, …, 1 (as the seed's code base configures its studies)."""
+SEED_SAMPLING = "grid:61"
+"""Pupil sampling of the seed's ESR: a 61 × 61 cell-centred grid over the full pupil (dense)."""
+
+
+def seed_esr(lens: Lens, system: System) -> Tensor:
+    """() Effective spot radius (mm) on the seed's measure (S4.2.1, S7): ``SEED_FIELDS`` equally spaced
+    relative fields 0 … 1 with equal weights, the system's wavelength weights, a dense full-pupil grid
+    (``SEED_SAMPLING``) and the system's aiming and front aperture, whatever fields and sampling the
+    spec optimizes with. Comparable between lenses of one study and with the seed's published ESRs."""
+    from lensopt.optics.bundle import trace_bundle
+    from lensopt.optics.sampling import PupilSampling
+
+    rel = torch.linspace(0.0, 1.0, SEED_FIELDS, dtype=lens.dtype, device=lens.device)
+    pupil = PupilSampling.parse(SEED_SAMPLING).points(dtype=lens.dtype, device=lens.device)
+    bundle = trace_bundle(lens, system, pupil, rel_field=rel)
+    return spot_stats(bundle, system.wavelength_weights).effective_radius

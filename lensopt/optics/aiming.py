@@ -28,7 +28,8 @@ from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.placement import surface_frames, to_local
 from lensopt.optics.sampling import launch
-from lensopt.optics.trace import RayTrace, trace
+from lensopt.optics.trace import RayTrace, lens_tensors, trace
+from lensopt.optics.transforms import all_settled, carries_derivatives
 
 __all__ = ["ChiefAim", "aim_chief", "PupilAim", "aim_full", "stop_radius", "stop_hit"]
 
@@ -51,6 +52,22 @@ class ChiefAim:
     converged: Tensor
     iterations: int
     offset_x: Tensor | None = None
+    solve: ChiefSolve | None = None
+
+
+@dataclass(frozen=True)
+class ChiefSolve:
+    """The detached part of chief aiming (``aim_chief``), a function of the lens values only: the
+    Newton iterate δ (F, W) the final step is taken from, the chief ray's stop height y there (mm), the
+    slope dy/dδ (a forward difference), where that slope is usable (``ok``) and where the ray reached
+    the stop (``valid``). Handing it back to ``aim_chief`` for the same lens values skips the iterations (a
+    Jacobian after an evaluation at the same θ) and gives the same numbers bit for bit."""
+
+    delta: Tensor
+    y: Tensor
+    slope: Tensor
+    ok: Tensor
+    valid: Tensor
 
 
 def stop_hit(lens: Lens, rays) -> tuple[Tensor, Tensor, RayTrace]:
@@ -74,49 +91,88 @@ def aim_chief(
     iterations: int = 8,
     tol_mm: float | None = None,
     tan_field_x: Tensor | None = None,
+    solved: ChiefSolve | None = None,
 ) -> ChiefAim:
     """Pupil offsets that put the real chief ray of every field and wavelength on the stop centre.
 
     Args:
         tan_field: (F,) object-space chief-ray slopes.
         epd, entrance_pupil_z: paraxial entrance pupil diameter and position, mm.
-        iterations: Newton iterations (fixed count; the residual is reported).
+        iterations: Newton iterations (at most; they stop at convergence where values may be looked
+            at, ``transforms.all_settled``; the residual is reported).
         tol_mm: convergence tolerance on the stop, default 1e3·eps·(1 + EPD).
         tan_field_x: (F,) slopes in x of two-dimensional fields (``launch``), or None.
+        solved: the ``ChiefSolve`` of an earlier call on the same lens values (``ChiefAim.solve``).
 
     A placed lens (or ``tan_field_x``) is aimed in x and y (``offset_x``; see the module docstring).
     """
     if lens.placement is not None or tan_field_x is not None:
         return _aim_chief_2d(lens, system, tan_field, tan_field_x, epd=epd, entrance_pupil_z=entrance_pupil_z,
                              iterations=iterations, tol_mm=tol_mm)
-    num_f, num_w = tan_field.shape[0], lens.wavelength_um.shape[0]
-
     def stop_y(delta: Tensor, lens_: Lens, tan_: Tensor, epd_: Tensor, ep_z: Tensor) -> tuple[Tensor, Tensor]:
-        pupil = torch.stack([torch.zeros_like(delta), delta], -1).unsqueeze(-2)  # (F, W, 1, 2)
-        rays = launch(lens_, system, pupil, tan_, epd=epd_, entrance_pupil_z=ep_z)
+        """Chief-ray stop heights (mm) and validity for pupil offsets δ (F, W) or (F, W, P)."""
+        d = delta if delta.dim() == 3 else delta.unsqueeze(-1)
+        rays = launch(lens_, system, torch.stack([torch.zeros_like(d), d], -1), tan_, epd=epd_, entrance_pupil_z=ep_z)
         hit = trace(lens_, rays, upto=lens_.stop)
-        return hit.pos[..., 0, 1], hit.valid[..., 0]
+        y, valid = hit.pos[..., 1], hit.valid
+        return (y, valid) if delta.dim() == 3 else (y[..., 0], valid[..., 0])
 
+    tol = tol_mm if tol_mm is not None else 1e3 * torch.finfo(lens.dtype).eps * (1.0 + epd.detach())
+    solve = solved if solved is not None else _chief_solve(stop_y, lens, tan_field, epd, entrance_pupil_z,
+                                                           iterations, tol)
+    delta, slope, ok = solve.delta, solve.slope, solve.ok
+    # Final step on the attached lens with the exact slope (forward mode, detached): exact first
+    # derivatives of δ at convergence. Without derivatives the attached trace is the detached one (same
+    # values) and the slope only scales a step of rounding size: both are skipped.
+    if carries_derivatives(*lens_tensors(lens), tan_field, epd, entrance_pupil_z):
+        det = (_detach_lens(lens), tan_field.detach(), epd.detach(), entrance_pupil_z.detach())
+        _, exact = torch.func.jvp(lambda v: stop_y(v, *det)[0], (delta,), (torch.ones_like(delta),))
+        ok = exact.abs() > 1e-12
+        slope = torch.where(ok, exact, torch.ones_like(exact))
+        y, valid = stop_y(delta, lens, tan_field, epd, entrance_pupil_z)
+    else:
+        y, valid = solve.y, solve.valid
+    offset = torch.where(ok, delta - y / slope, delta)
+    converged = valid & (solve.y.abs() <= tol)
+    return ChiefAim(offset=offset, residual_mm=solve.y, converged=converged, iterations=iterations, solve=solve)
+
+
+FD_STEP = 2.0**-23
+"""Step in δ (relative pupil units) of the forward-difference slopes of chief aiming's iterations."""
+FULL_FD_STEP = 2.0**-17
+"""Step (relative pupil units) of full aiming's central differences: truncation (h² f‴/6f′) and
+rounding (eps |y| / h) both about 1e-10 of the slope."""
+
+
+def _chief_solve(stop_y, lens: Lens, tan_field: Tensor, epd: Tensor, entrance_pupil_z: Tensor,  # noqa: ANN001
+                 iterations: int, tol: Tensor | float) -> ChiefSolve:
+    """Newton on δ with detached values (``aim_chief``), to convergence or ``iterations − 1`` steps.
+
+    The slopes are forward differences, the chief ray and a neighbour at δ + ``FD_STEP`` traced in one
+    batch (one plain trace per iteration instead of a forward-mode one, which dispatches about three
+    times the operations): relative slope error ~1e-7, which costs at most an iteration to the same
+    tolerance. The final step of ``aim_chief`` takes the exact slope where derivatives are wanted."""
+    num_f, num_w = tan_field.shape[0], lens.wavelength_um.shape[0]
     detached = _detach_lens(lens)
     args = (detached, tan_field.detach(), epd.detach(), entrance_pupil_z.detach())
     delta = torch.zeros(num_f, num_w, dtype=lens.dtype, device=lens.device)
-    ones = torch.ones_like(delta)
 
-    def newton_terms(d: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        y, slope = torch.func.jvp(lambda v: stop_y(v, *args)[0], (d,), (ones,))
-        ok = slope.abs() > 1e-12
-        return y, torch.where(ok, slope, torch.ones_like(slope)), ok
+    def newton_terms(d: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        y2, valid2 = stop_y(torch.stack([d, d + FD_STEP], -1), *args)
+        y, valid = y2[..., 0], valid2[..., 0]
+        slope = (y2[..., 1] - y) / FD_STEP
+        ok = valid2[..., 1] & (slope.abs() > 1e-12)
+        return y, torch.where(ok, slope, torch.ones_like(slope)), ok, valid
 
+    y, slope, ok, valid = newton_terms(delta)
     for _ in range(iterations - 1):
-        y, slope, ok = newton_terms(delta)
+        # Converged everywhere (eager only, ``all_settled``): the remaining steps would move δ by
+        # rounding only, and the final step is taken from here.
+        if all_settled((y.abs() <= tol) | ~ok):
+            break
         delta = torch.where(ok, delta - y / slope, delta)
-    # Final step on the attached lens: exact first derivatives of δ at convergence.
-    y_det, slope, ok = newton_terms(delta)
-    y, valid = stop_y(delta, lens, tan_field, epd, entrance_pupil_z)
-    offset = torch.where(ok, delta - y / slope, delta)
-    tol = tol_mm if tol_mm is not None else 1e3 * torch.finfo(lens.dtype).eps * (1.0 + epd.detach())
-    converged = valid & (y_det.abs() <= tol)
-    return ChiefAim(offset=offset, residual_mm=y_det, converged=converged, iterations=iterations)
+        y, slope, ok, valid = newton_terms(delta)
+    return ChiefSolve(delta, y, slope, ok, valid)
 
 
 def _aim_chief_2d(lens: Lens, system: System, tan_field: Tensor, tan_field_x: Tensor | None, *, epd: Tensor,
@@ -150,16 +206,18 @@ def _aim_chief_2d(lens: Lens, system: System, tan_field: Tensor, tan_field_x: Te
                             (jx[..., 0] * r[..., 1] - jx[..., 1] * r[..., 0]) / safe], -1)
         return r, step, ok, (jx, jy, safe)
 
+    tol = tol_mm if tol_mm is not None else 1e3 * torch.finfo(lens.dtype).eps * (1.0 + epd.detach())
+    r_det, step, ok, (jx, jy, safe) = newton_terms(delta)
     for _ in range(iterations - 1):
-        _, step, ok, _ = newton_terms(delta)
+        if all_settled((torch.sqrt((r_det * r_det).sum(-1)) <= tol) | ~ok):  # as in ``aim_chief``
+            break
         delta = torch.where(ok[..., None], delta - step, delta)
+        r_det, step, ok, (jx, jy, safe) = newton_terms(delta)
     # Final step on the attached lens (detached Jacobian, attached residual): exact first derivatives.
-    r_det, _, ok, (jx, jy, safe) = newton_terms(delta)
     r, valid = stop_xy(delta, lens, tan_field, tan_field_x, epd, entrance_pupil_z)
     step = torch.stack([(jy[..., 1] * r[..., 0] - jy[..., 0] * r[..., 1]) / safe,
                         (jx[..., 0] * r[..., 1] - jx[..., 1] * r[..., 0]) / safe], -1)
     offset = torch.where(ok[..., None], delta - step, delta)
-    tol = tol_mm if tol_mm is not None else 1e3 * torch.finfo(lens.dtype).eps * (1.0 + epd.detach())
     miss = torch.sqrt((r_det * r_det).sum(-1))
     converged = valid & (miss <= tol)
     return ChiefAim(offset=offset[..., 1], residual_mm=miss, converged=converged, iterations=iterations,
@@ -217,6 +275,24 @@ class PupilAim:
     steps: int
     tol_mm: Tensor
     held: Tensor | None = None
+    solve: FullSolve | None = None
+
+
+@dataclass(frozen=True)
+class FullSolve:
+    """The detached part of full aiming (``aim_full``), a function of the lens values only: the
+    unknowns u (F, W, 3) the final step is taken from and the last point that traced (``u_good``),
+    the stop misses ``res``, slopes and usable-slope mask there, and the report of the aimed rays
+    (``residual``, ``traced``). Handed back for the same lens values it skips the detached traces and
+    gives the same numbers bit for bit (as ``ChiefSolve``)."""
+
+    u: Tensor
+    u_good: Tensor
+    res: Tensor
+    slope: Tensor
+    ok: Tensor
+    residual: Tensor
+    traced: Tensor
 
 
 def stop_radius(lens: Lens, system: System, *, epd: Tensor, entrance_pupil_z: Tensor) -> Tensor:
@@ -244,6 +320,7 @@ def aim_full(
     chief: ChiefAim | None = None,
     tol_mm: float | None = None,
     aperture: tuple[Tensor, Tensor] | None = None,
+    solved: FullSolve | None = None,
 ) -> PupilAim:
     """Full ray aiming (S1.3.2, S21–S22): pupil factors that put the marginal rays on the stop edge.
 
@@ -268,6 +345,7 @@ def aim_full(
             held on its edge (the bottom, on a vignetting telephoto) while the others (top, sagittal)
             are aimed at the stop edge; the lateral ray starts on the opening's chord. Without it the
             unvignetted pupil is aimed, whose cut-off rays may miss the front elements altogether.
+        solved: the ``FullSolve`` of an earlier call on the same lens values (``PupilAim.solve``).
 
     Returns:
         A ``PupilAim`` with the factors, residuals on the stop and convergence flags.
@@ -286,24 +364,32 @@ def aim_full(
     r_det = radius.detach()
 
     def stop_hits(u: Tensor, y0: Tensor, args: tuple) -> tuple[Tensor, Tensor]:
-        """u: (F, W, 3) = (y_lo, y_hi, x_l), y0: (F, W) launch height of the lateral ray → stop
-        coordinates (y, y, ρ) of the three rays and their validity, (F, W, 3)."""
+        """u: (F, W, 3) = (y_lo, y_hi, x_l) or (F, W, K, 3) (K sets traced in one batch), y0: (F, W)
+        launch height of the lateral ray → stop coordinates (y, y, ρ) of the three rays and their
+        validity, (F, W, 3) or (F, W, K, 3)."""
         lens_, tan_, epd_, ep_z, x0 = args
-        zero = torch.zeros_like(y0) if x0 is None else x0
-        pupil = torch.stack([torch.stack([zero, u[..., 0]], -1), torch.stack([zero, u[..., 1]], -1),
-                             torch.stack([u[..., 2] + zero, y0], -1)], -2)
-        x, y, hit = stop_hit(lens_, launch(lens_, system, pupil, tan_, epd=epd_, entrance_pupil_z=ep_z))
+        sets = u if u.dim() == 4 else u.unsqueeze(-2)
+        zero = (torch.zeros_like(y0) if x0 is None else x0).unsqueeze(-1).expand_as(sets[..., 0])
+        pupil = torch.stack([torch.stack([zero, sets[..., 0]], -1), torch.stack([zero, sets[..., 1]], -1),
+                             torch.stack([sets[..., 2] + zero, y0.unsqueeze(-1).expand_as(zero)], -1)], -2)
+        num_f, num_w, k = sets.shape[:3]
+        x, y, hit = stop_hit(lens_, launch(lens_, system, pupil.reshape(num_f, num_w, 3 * k, 2), tan_, epd=epd_,
+                                           entrance_pupil_z=ep_z))
+        x, y, valid = (t.reshape(num_f, num_w, k, 3) for t in (x, y, hit.valid))
         rho = torch.sqrt((x[..., 2] ** 2 + y[..., 2] ** 2).clamp_min(torch.finfo(u.dtype).tiny))
-        return torch.stack([y[..., 0], y[..., 1], rho], -1), hit.valid
+        g = torch.stack([y[..., 0], y[..., 1], rho], -1)
+        return (g, valid) if u.dim() == 4 else (g[..., 0, :], valid[..., 0, :])
 
     sign = torch.tensor([-1.0, 1.0, 1.0], dtype=lens.dtype, device=lens.device)
 
     def newton(u: Tensor, args: tuple, r: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        """Residuals, diagonal derivatives (one jvp: each ray depends on its own unknown once the
-        lateral ray's launch height y0 is held) and validity at u."""
+        """Residuals, diagonal derivatives and validity at u. Each ray depends on its own unknown once
+        the lateral ray's launch height y0 is held, so the derivatives are central differences of the
+        three rays, all nine traced in one batch (``FULL_FD_STEP``: relative error ~1e-10)."""
         y0 = 0.5 * (u[..., 0] + u[..., 1])
-        (g, valid), (dg, _) = torch.func.jvp(lambda v: stop_hits(v, y0, args), (u,), (torch.ones_like(u),))
-        return g - sign * r, dg, valid
+        g3, valid3 = stop_hits(torch.stack([u - FULL_FD_STEP, u, u + FULL_FD_STEP], -2), y0, args)
+        dg = (g3[..., 2, :] - g3[..., 0, :]) / (2.0 * FULL_FD_STEP)
+        return g3[..., 1, :] - sign * r, dg, valid3.all(-2)
 
     y_c = chief.offset.detach()
     u = torch.stack([y_c - 1.0, y_c + 1.0, torch.ones_like(y_c)], -1)
@@ -317,7 +403,9 @@ def aim_full(
         chord = torch.sqrt((rho_d**2 - (mid - c_d) ** 2).clamp_min(0.0))
         u = torch.stack([u[..., 0], u[..., 1], torch.minimum(u[..., 2], chord.clamp_min(1e-3))], -1)
     u_good = u.clone()
-    for _ in range(steps - 1):
+    if solved is not None:
+        u, u_good = solved.u, solved.u_good
+    for _ in range(steps - 1 if solved is None else 0):
         res, slope, ok = newton(u, det_args, r_det)
         good_slope = ok & (slope.abs() > 1e-12)
         step = (res / torch.where(good_slope, slope, torch.ones_like(slope))).clamp(-MAX_AIM_STEP, MAX_AIM_STEP)
@@ -328,14 +416,18 @@ def aim_full(
             u = _into_opening(u, lo_d, hi_d)
     # Final step on the attached lens: meridional rays first, then the lateral ray launched at the
     # attached y0, so that its derivative includes the coupling (exact at convergence).
-    res_d, slope, ok = newton(u, det_args, r_det)
+    res_d, slope, ok = newton(u, det_args, r_det) if solved is None else (solved.res, solved.slope, solved.ok)
     good = ok & (slope.abs() > 1e-12)
     safe_slope = torch.where(good, slope, torch.ones_like(slope))
     full_step = good & ((res_d / safe_slope).abs() <= MAX_AIM_STEP)
     fallback = torch.where(good, u - (res_d / safe_slope).clamp(-MAX_AIM_STEP, MAX_AIM_STEP),
                            torch.where(ok, u, u_good))
-    g_att, _ = stop_hits(u, 0.5 * (u[..., 0] + u[..., 1]), att_args)
-    new = torch.where(full_step, u - (g_att - sign * radius) / safe_slope, fallback)
+    if carries_derivatives(*lens_tensors(lens), tan_field, epd, entrance_pupil_z, radius):
+        g_att, _ = stop_hits(u, 0.5 * (u[..., 0] + u[..., 1]), att_args)
+        miss = g_att - sign * radius
+    else:  # the attached trace would repeat the detached one: same values
+        miss = res_d
+    new = torch.where(full_step, u - miss / safe_slope, fallback)
     held = None
     if lo_b is not None:
         held = torch.stack([new[..., 0].detach() <= lo_d, new[..., 1].detach() >= hi_d], -1)
@@ -345,26 +437,15 @@ def aim_full(
     final = torch.stack([new[..., 0], new[..., 1], lat], -1)
 
     # Report where the final marginal rays and the aimed chief ray meet the stop.
-    with torch.no_grad():
-        fin = final.detach()
-        g_fin, valid_fin = stop_hits(fin, 0.5 * (fin[..., 0] + fin[..., 1]), det_args)
-        res_fin = torch.where(valid_fin, g_fin - sign * r_det, torch.zeros_like(g_fin))
-        if held is not None:  # a held ray that meets the stop inside its edge is where it should be
-            eps_ = 1e3 * torch.finfo(lens.dtype).eps * (1.0 + epd.detach())
-            inside = held & (sign[:2] * res_fin[..., :2] <= eps_)
-            res_fin = torch.cat([torch.where(inside, torch.zeros_like(inside, dtype=res_fin.dtype),
-                                             res_fin[..., :2]), res_fin[..., 2:]], -1)
-        px = torch.zeros_like(y_c) if det_args[4] is None else det_args[4]
-        pupil = torch.stack([px, chief.offset.detach()], -1).unsqueeze(-2)
-        _, chief_y, hit = stop_hit(detached, launch(detached, system, pupil, det_args[1], epd=det_args[2],
-                                                    entrance_pupil_z=det_args[3]))
-        chief_ok = hit.valid[..., 0]
-        chief_res = torch.where(chief_ok, chief_y[..., 0], torch.zeros_like(y_c))
-    residual = torch.cat([res_fin, chief_res.unsqueeze(-1)], -1)
-    traced = torch.cat([valid_fin, chief_ok.unsqueeze(-1)], -1)
     eps = torch.finfo(lens.dtype).eps
     tol = torch.as_tensor(tol_mm if tol_mm is not None else 1e3 * eps * (1.0 + epd.detach()), dtype=lens.dtype,
                           device=lens.device)
+    if solved is not None:
+        residual, traced = solved.residual, solved.traced
+    else:
+        residual, traced = _aim_report(final, held, chief, detached, det_args, r_det, sign, y_c, stop_hits, system,
+                                       epd)
+    valid_fin = traced[..., :3]
     converged = traced.all(-1) & (residual.abs() <= tol).all(-1)
     y_lo, y_hi, x_l = final.unbind(-1)
     factors = torch.stack([1.0 + y_lo, 1.0 - y_hi, 1.0 - x_l], -1)
@@ -374,8 +455,34 @@ def aim_full(
     offset = chief.offset
     circle = torch.stack([offset, -offset, torch.zeros_like(offset)], -1)
     factors = torch.where(lost, circle, factors)
+    solve = FullSolve(u.detach(), u_good.detach(), res_d, slope, ok, residual, traced)
     return PupilAim(factors=factors, chief=chief, stop_radius_mm=radius, residual_mm=residual, traced=traced,
-                    converged=converged, steps=steps, tol_mm=tol, held=held)
+                    converged=converged, steps=steps, tol_mm=tol, held=held, solve=solve)
+
+
+def _aim_report(final: Tensor, held: Tensor | None, chief: ChiefAim, detached: Lens, det_args: tuple, r_det: Tensor,
+                sign: Tensor, y_c: Tensor, stop_hits, system: System, epd: Tensor) -> tuple[Tensor, Tensor]:  # noqa: ANN001
+    """(F, W, 4) stop misses of the aimed inferior, superior and lateral rays and of the chief ray, and
+    whether each traced (``PupilAim.residual_mm``, ``traced``)."""
+    with torch.no_grad():
+        fin = final.detach()
+        g_fin, valid_fin = stop_hits(fin, 0.5 * (fin[..., 0] + fin[..., 1]), det_args)
+        res_fin = torch.where(valid_fin, g_fin - sign * r_det, torch.zeros_like(g_fin))
+        if held is not None:  # a held ray that meets the stop inside its edge is where it should be
+            eps_ = 1e3 * torch.finfo(detached.dtype).eps * (1.0 + epd.detach())
+            inside = held & (sign[:2] * res_fin[..., :2] <= eps_)
+            res_fin = torch.cat([torch.where(inside, torch.zeros_like(inside, dtype=res_fin.dtype),
+                                             res_fin[..., :2]), res_fin[..., 2:]], -1)
+        if chief.solve is not None:  # the chief ray's miss where its final step was taken from
+            chief_ok, chief_y = chief.solve.valid, chief.solve.y
+        else:
+            px = torch.zeros_like(y_c) if det_args[4] is None else det_args[4]
+            pupil = torch.stack([px, chief.offset.detach()], -1).unsqueeze(-2)
+            _, chief_y, hit = stop_hit(detached, launch(detached, system, pupil, det_args[1], epd=det_args[2],
+                                                        entrance_pupil_z=det_args[3]))
+            chief_ok, chief_y = hit.valid[..., 0], chief_y[..., 0]
+        chief_res = torch.where(chief_ok, chief_y, torch.zeros_like(y_c))
+    return torch.cat([res_fin, chief_res.unsqueeze(-1)], -1), torch.cat([valid_fin, chief_ok.unsqueeze(-1)], -1)
 
 
 def _into_opening(u: Tensor, lo: Tensor, hi: Tensor) -> Tensor:

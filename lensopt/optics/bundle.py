@@ -39,7 +39,8 @@ from lensopt.optics.vignetting import (
 )
 from lensopt.resources import BYTES_PER_RAY_SURFACE, require
 
-__all__ = ["Bundle", "PupilShape", "pupil_shape", "trace_bundle", "AIM_MODES"]
+__all__ = ["Bundle", "Launch", "PupilShape", "pupil_shape", "trace_bundle", "launch_bundle", "finish_bundle",
+           "AIM_MODES"]
 
 AIM_MODES = ("none", "chief", "full")
 
@@ -72,9 +73,12 @@ def pupil_shape(
     aim_steps: int = 1,
     vignetting: Tensor | None = None,
     tan_field_x: Tensor | None = None,
+    solved: PupilShape | None = None,
 ) -> PupilShape:
     """Aim, apply fixed factors ``vignetting`` ((F, W|1, 3) or None), cut by the front aperture.
-    ``tan_field_x``: x slopes of two-dimensional fields (chief aiming only)."""
+    ``tan_field_x``: x slopes of two-dimensional fields (chief aiming only). ``solved``: the shape of an
+    earlier call on the same lens values, whose detached aiming solves are reused (``ChiefSolve``,
+    ``FullSolve``: the same numbers, without the iterations)."""
     if aim not in AIM_MODES:
         raise ValueError(f"aim must be one of {AIM_MODES}, got {aim!r}")
     num_f, num_w = tan_field.shape[0], lens.wavelength_um.shape[0]
@@ -82,7 +86,8 @@ def pupil_shape(
     chief = full = blocked = None
     factors: Tensor | None = None
     if aim in ("chief", "full"):
-        chief = aim_chief(lens, system, tan_field, tan_field_x=tan_field_x, **opts)
+        chief = aim_chief(lens, system, tan_field, tan_field_x=tan_field_x, **opts,
+                          solved=None if solved is None or solved.chief is None else solved.chief.solve)
         zero = torch.zeros_like(chief.offset)
         factors = ellipse_to_factors(chief.offset, 1.0 + zero, 1.0 + zero)
     fa = system.front_aperture
@@ -92,7 +97,8 @@ def pupil_shape(
     if aim == "full":
         # Behind a front aperture the vignetting comes first: only rays through the opening are aimed.
         opening = None if fa is None else (centre[:, None], radius)
-        full = aim_full(lens, system, tan_field, steps=aim_steps, chief=chief, aperture=opening, **opts)
+        full = aim_full(lens, system, tan_field, steps=aim_steps, chief=chief, aperture=opening, **opts,
+                        solved=None if solved is None or solved.full is None else solved.full.solve)
         factors = full.factors
     if vignetting is not None:
         vignetting = vignetting.to(lens.dtype).expand(num_f, num_w, 3)
@@ -122,6 +128,7 @@ class Bundle:
         vignetting: (F, W, 3) effective factors (V_i, V_s, V_l) the pupil was launched with, relative
             to the paraxial entrance pupil, or None for the plain unit disc.
         pupil_aim: full-aiming result (mode ``full``), or None.
+        shape: the pupil shape the rays were launched with (``pupil_shape``), or None.
     """
 
     first_order: FirstOrder
@@ -134,6 +141,7 @@ class Bundle:
     half_pupil: bool
     vignetting: Tensor | None = None
     pupil_aim: PupilAim | None = None
+    shape: PupilShape | None = None
 
 
 def trace_bundle(
@@ -151,6 +159,7 @@ def trace_bundle(
     shape: PupilShape | None = None,
     rel_field_x: Tensor | None = None,
     backend: str | None = None,
+    solved: PupilShape | None = None,
 ) -> Bundle:
     """Trace pupil points ``pupil`` ((P, 2) or (F, W, P, 2)) for every field and wavelength.
 
@@ -168,11 +177,52 @@ def trace_bundle(
         rel_field_x: (F,) relative fields in x (two-dimensional fields, for lenses that are not
             rotationally symmetric), scaled like ``rel_field``; needs ``aim`` ``none`` or ``chief``.
         backend: ``auto``, ``eager`` or ``compiled`` (``optics.backend``); default: ``use_backend``'s.
+        solved: the pupil shape of an earlier bundle on the same lens values and fields
+            (``Bundle.shape``), whose detached aiming solves are reused (``pupil_shape``).
 
     A lens with a placement (decentered or tilted surfaces) has no mirror symmetry: a half-pupil
     sampling is mirrored to the full pupil here and ``half_pupil`` becomes False, so centroids are
     computed in x and y.
     """
+    start = launch_bundle(lens, system, pupil, half_pupil=half_pupil, rel_field=rel_field, aim=aim, fo=fo,
+                          vignetting=vignetting, aim_steps=aim_steps, shape=shape, rel_field_x=rel_field_x,
+                          solved=solved)
+    return finish_bundle(system, start, trace_with(lens, start.rays, record=record, backend=backend))
+
+
+@dataclass(frozen=True)
+class Launch:
+    """A bundle before its trace: the rays ``trace_bundle`` launches and how they were placed.
+
+    Attributes: those of ``Bundle`` of the same names (``rays`` batch (F, W, P)); ``shape`` the pupil
+    shape (aiming, vignetting, front aperture) the rays were launched with.
+    """
+
+    first_order: FirstOrder
+    rel_field: Tensor
+    tan_field: Tensor
+    pupil: Tensor
+    rays: Rays
+    shape: PupilShape
+    half_pupil: bool
+
+
+def launch_bundle(
+    lens: Lens,
+    system: System,
+    pupil: Tensor,
+    *,
+    half_pupil: bool = False,
+    rel_field: Tensor | None = None,
+    aim: str | None = None,
+    fo: FirstOrder | None = None,
+    vignetting: Tensor | None = None,
+    aim_steps: int | None = None,
+    shape: PupilShape | None = None,
+    rel_field_x: Tensor | None = None,
+    solved: PupilShape | None = None,
+) -> Launch:
+    """The first half of ``trace_bundle`` (same arguments): first-order data, pupil shape, launched rays."""
     fo = first_order(lens, system) if fo is None else fo
     if rel_field is None:
         rel_field = torch.tensor(system.rel_field, dtype=lens.dtype, device=lens.device)
@@ -196,7 +246,8 @@ def trace_bundle(
         vignetting = torch.tensor(system.vignetting, dtype=lens.dtype, device=lens.device).unsqueeze(1)
     if shape is None:
         shape = pupil_shape(lens, system, tan, fo, aim=mode, vignetting=vignetting,
-                            aim_steps=system.aim_steps if aim_steps is None else aim_steps, tan_field_x=tan_x)
+                            aim_steps=system.aim_steps if aim_steps is None else aim_steps, tan_field_x=tan_x,
+                            solved=solved)
     if shape.factors is not None:
         pupil = apply_vignetting(pupil, shape.factors)
     if shape.chief is not None and shape.chief.offset_x is not None:
@@ -204,8 +255,13 @@ def trace_bundle(
         shift = torch.stack([shape.chief.offset_x, torch.zeros_like(shape.chief.offset_x)], -1)
         pupil = pupil + shift[:, :, None]
     rays = launch(lens, system, pupil, tan, epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z, tan_field_x=tan_x)
-    result = trace_with(lens, rays, record=record, backend=backend)
-    fa = system.front_aperture
+    return Launch(fo, rel_field, tan, pupil, rays, shape, half_pupil)
+
+
+def finish_bundle(system: System, start: Launch, result: RayTrace) -> Bundle:
+    """The second half of ``trace_bundle``: the trace of ``start.rays`` with the front aperture's
+    blocked rays marked, as a ``Bundle``."""
+    fa, rays, shape = system.front_aperture, start.rays, start.shape
     if fa is not None:
         # Rays outside the opening (a field blocked entirely, or the corners of an ``extent`` ellipse)
         # are stopped there first, whatever happens to them later.
@@ -215,4 +271,5 @@ def trace_bundle(
             out = out | shape.blocked[..., None]
         status = torch.where(out, torch.full_like(result.status, int(Status.BLOCKED)), result.status)
         result = dataclasses.replace(result, status=status)
-    return Bundle(fo, rel_field, tan, pupil, rays, result, shape.chief, half_pupil, shape.factors, shape.full)
+    return Bundle(start.first_order, start.rel_field, start.tan_field, start.pupil, rays, result, shape.chief,
+                  start.half_pupil, shape.factors, shape.full, shape)

@@ -11,6 +11,7 @@ import torch
 from torch import Tensor
 
 from lensopt.optics.surfaces import sag
+from lensopt.optics.transforms import all_settled
 
 __all__ = ["intersect_quadric", "intersect_asphere", "quadric_xyz", "quadric_flag_xyz", "quadric_near_xyz",
            "asphere_xyz", "Vec3", "NEWTON_ITERATIONS"]
@@ -168,14 +169,19 @@ def asphere_xyz(
     # Start from the conic (a good start: asphere terms are small near the vertex), else the plane.
     t_conic, hit = quadric_xyz(p0, d0, c0, k0)
     t = torch.where(hit, t_conic, _safe_div(-p0[2], d0[2]))
+    eps64 = 64.0 * torch.finfo(t.dtype).eps
+    reach = 1.0 + torch.maximum(p0[0].abs(), p0[1].abs())
+    f, fp, defined = _residual(p0, d0, t, c0, k0, a0)
     for _ in range(iterations):
-        f, fp, _ = _residual(p0, d0, t, c0, k0, a0)
+        # Stop once every ray whose sag is defined has converged (``all_settled``: eager only; further
+        # steps would move t by rounding only). The flags below are those of the fixed count.
+        if all_settled((f.abs() <= eps64 * (reach + t.abs())) | ~defined):
+            break
         t_next = t - _safe_div(f, fp)
         # A step that overflows (iterates running away on a pathological sag, float32) is not taken.
         t = torch.where(torch.isfinite(t_next), t_next, t)
-    f, _, defined = _residual(p0, d0, t, c0, k0, a0)
-    scale = 1.0 + torch.maximum(p0[0].abs(), p0[1].abs()) + t.abs()
-    tol = 64.0 * torch.finfo(t.dtype).eps * scale
+        f, fp, defined = _residual(p0, d0, t, c0, k0, a0)
+    tol = eps64 * (reach + t.abs())
     converged = f.abs() <= tol  # False where f is not finite
     # Differentiable final step from the converged point. Rows that did not converge take it from
     # t = 0 (the ray's own, finite start) and return 0: no far-away iterate feeds inf or NaN into

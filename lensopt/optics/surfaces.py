@@ -15,6 +15,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from lensopt.optics.transforms import capturing
+
 __all__ = ["sag", "phase_slope", "normal_from_slope", "normal_xyz", "conic_normal_xyz", "sag_domain"]
 
 
@@ -104,8 +106,19 @@ def normal_xyz(x: Tensor, y: Tensor, dz_du: Tensor) -> tuple[Tensor, Tensor, Ten
 
 
 def _even_polynomial(u: Tensor, coeffs: Tensor, first_power: int) -> tuple[Tensor, Tensor]:
-    """``p(u) = Σ_j coeffs[j] u^(first_power + j)`` and ``dp/du`` by Horner's scheme."""
+    """``p(u) = Σ_j coeffs[j] u^(first_power + j)`` and ``dp/du``.
+
+    Eager: the powers of u in one running product and two matrix–vector products (a handful of
+    operations whatever the number of coefficients: the eager trace is bound by the count of
+    operations, not their size). Inside a captured graph (``torch.compile``, ``make_fx``): Horner's
+    scheme, elementwise, which the compiler fuses into the trace's loop. The same values to rounding.
+    """
     n = coeffs.shape[-1]
+    if coeffs.dim() == 1 and not capturing():
+        top = first_power + n - 1
+        powers = torch.cat([torch.ones_like(u).unsqueeze(-1), u.unsqueeze(-1).expand(*u.shape, top)], -1).cumprod(-1)
+        k = torch.arange(first_power, first_power + n, dtype=coeffs.dtype, device=coeffs.device)
+        return powers[..., first_power:] @ coeffs, powers[..., first_power - 1:top] @ (k * coeffs)
     # Horner on q(u) = Σ_j coeffs[j] u^j, then p = u^first_power q, p' = u^(fp−1)(fp q + u q').
     q = torch.zeros_like(u)
     dq = torch.zeros_like(u)

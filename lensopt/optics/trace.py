@@ -18,9 +18,10 @@ from torch import Tensor
 
 from lensopt.optics.interact import bend_xyz, refract_ratio_xyz
 from lensopt.optics.intersect import NEWTON_ITERATIONS, asphere_xyz, quadric_flag_xyz, quadric_near_xyz
-from lensopt.optics.lens import Lens
-from lensopt.optics.placement import surface_frames, to_global, to_local
+from lensopt.optics.lens import Lens, SurfaceShape
+from lensopt.optics.placement import Frames, surface_frames, to_global, to_local
 from lensopt.optics.surfaces import conic_normal_xyz, normal_xyz, phase_slope, sag
+from lensopt.optics.transforms import carries_derivatives
 
 __all__ = ["Status", "REASONS", "Rays", "SurfaceHit", "RayTrace", "trace", "failure_counts", "KernelOptions",
            "trace_kernel", "index_ratio"]
@@ -160,12 +161,12 @@ def index_ratio(lens: Lens) -> Tensor:
 
 def _trace(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, upto: int | None, record: bool, newton_iterations: int,
            *, shortcuts: bool, kernel: KernelOptions | None = None, ratio: Tensor | None = None) -> RayTrace:
-    """The trace of ``trace``. ``shortcuts`` (eager, nothing watching: the chunked path) skips work
-    that a look at the values shows cannot change them (a select whose condition holds for every
-    ray, the far root of a quadric that no ray needs): the same numbers, fewer full-array passes.
-    Never inside torch.compile, vmap or forward mode, where a branch on values is not allowed.
-    ``kernel``: the compiled trace's formulation (``KernelOptions``, with its ``ratio`` table); None:
-    the reference one."""
+    """The trace of ``trace``: ``surface_step`` for every surface, then ``image_step``. ``shortcuts``
+    (eager, nothing watching: the chunked path) skips work that a look at the values shows cannot
+    change them (a select whose condition holds for every ray, the far root of a quadric that no ray
+    needs): the same numbers, fewer full-array passes. Never inside torch.compile, vmap or forward mode,
+    where a branch on values is not allowed. ``kernel``: the compiled trace's formulation
+    (``KernelOptions``, with its ``ratio`` table); None: the reference one."""
     compiling = torch.compiler.is_compiling()
     fast = kernel is not None
     batch = pos.shape[:-1]
@@ -174,13 +175,10 @@ def _trace(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, upto: int | None, r
     # algebra: inside torch.compile each boolean &, |, ~ costs mask-format conversions lane by lane
     # (more than the arithmetic around it). The running mask of live rays is ``status == 0``.
     status = torch.zeros(batch, dtype=pos.dtype, device=pos.device)
-    ok = status == _OK
-    failed_at = torch.full(batch, -1.0, dtype=pos.dtype, device=pos.device) if record else None
-    backtrack = torch.zeros(batch, dtype=pos.dtype, device=pos.device)
-    vertex = lens.vertex_z()
-    # Decentered/tilted surfaces: rays go into each surface's frame and back (optics.placement);
-    # a lens on its axis skips every transform (the symmetric fast path).
-    frames = None if lens.placement is None else surface_frames(lens.thickness, lens.placement)
+    book = Book(status, status == _OK,
+                torch.full(batch, -1.0, dtype=pos.dtype, device=pos.device) if record else None,
+                torch.zeros(batch, dtype=pos.dtype, device=pos.device))
+    geometry = lens_geometry(lens)
     if any(shape.diffractive for shape in lens.shapes):
         lam_mm = lens.wavelength_um[rays.wavelength] * 1e-3
     inv_index = 1.0 / lens.index  # (S+1, W): one division per medium, not per ray and surface
@@ -189,8 +187,7 @@ def _trace(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, upto: int | None, r
     # bounds checks inside the fused loop; the selects vectorize). Same values either way.
     wl_select = rays.wavelength.to(pos.dtype) if compiling and lens.index.shape[-1] <= _MAX_SELECT else None
     # Components: fused kernels vectorize over rays only when x, y, z are separate tensors.
-    x, y, z = pos.unbind(-1)
-    dx, dy, dz = dir.unbind(-1)
+    ray: Ray6 = (*pos.unbind(-1), *dir.unbind(-1))
     hits: list[SurfaceHit] = []
     # The compiled kernel writes its outputs component-major ((*B, 3) views of (3, *B) planes, as
     # ``compiled.component_major_rays`` stores rays): vector stores instead of strided scalar ones.
@@ -199,94 +196,237 @@ def _trace(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, upto: int | None, r
     last = lens.num_surfaces - 1 if upto is None else upto
     for s in range(last + 1):
         shape = lens.shapes[s]
-        c, k = lens.curvature[s], lens.conic[s]
-        if frames is not None:
-            x, y, z = to_local((x, y, z), frames.origin[s], frames.rotation[s])
-            dx, dy, dz = to_local((dx, dy, dz), None, frames.rotation[s])
-            lz = z
+        mode = StepMode(shape, stop_here=upto is not None and s == upto, record=record,
+                        near_only=fast and kernel.near_only[s], ratio=fast and kernel.ratio_refraction,
+                        newton_iterations=newton_iterations, shortcuts=shortcuts)
+        if mode.stop_here:
+            media: tuple[Tensor, ...] = ()
+        elif mode.ratio and not shape.diffractive:
+            media = (_per_ray(ratio[s], rays.wavelength, wl_select),)
         else:
-            lz = z - vertex[s]
-        if shape.kind == "asphere":
-            t, defined, converged = asphere_xyz((x, y, lz), (dx, dy, dz), c, k, lens.asphere[s],
-                                                iterations=newton_iterations)
-            status, ok = _fail(status, ok, ~defined, Status.MISSED, shortcuts)
-            status, ok = _fail(status, ok, ~converged, Status.NEWTON, shortcuts)
-        else:
-            if fast and kernel.near_only[s]:
-                t, hit = quadric_near_xyz((x, y, lz), (dx, dy, dz), c, k)
-            else:
-                t, hit = quadric_flag_xyz((x, y, lz), (dx, dy, dz), c, k, shortcuts=shortcuts)
-            status, ok = _fail(status, ok, hit == 0, Status.MISSED, shortcuts)
-        if s > 0:
-            backtrack = _flag(backtrack, ok, t < 0, shortcuts)
-        hx, hy, hz = x + t * dx, y + t * dy, lz + t * dz
-        u = hx * hx + hy * hy
-        if shape.clip:
-            status, ok = _fail(status, ok, u > lens.semi_diameter[s] ** 2, Status.CLIPPED, shortcuts)
-        failed_at = _first_failure(failed_at, ok, s)
-        if shape.kind == "asphere":
-            _, dz_du, _ = sag(u, c, k, lens.asphere[s])
-            normal = normal_xyz(hx, hy, dz_du)
-        elif shape.kind == "conic":
-            normal = conic_normal_xyz(hx, hy, hz, c, k)
-        else:  # sphere or plane: (−cx, −cy, 1 − cz) is a unit vector on the surface, no normalisation
-            normal = (-c * hx, -c * hy, 1.0 - c * hz)
-        if frames is None:
-            hz = hz + vertex[s]
-        if upto is not None and s == upto:
-            x, y, z = torch.where(ok, hx, x), torch.where(ok, hy, y), torch.where(ok, hz, z)
-            if frames is not None:
-                x, y, z = to_global((x, y, z), frames.origin[s], frames.rotation[s])
-                dx, dy, dz = to_global((dx, dy, dz), None, frames.rotation[s])
+            media = (_per_ray(lens.index[s], rays.wavelength, wl_select),
+                     _per_ray(inv_index[s + 1], rays.wavelength, wl_select))
+            if shape.diffractive:
+                media = media + (lam_mm,)
+        ray, book, rec = surface_step(s, geometry.surface(s), ray, media, book, mode)
+        if rec is not None:
+            hits.append(SurfaceHit(*(stack(v) for v in rec[:4]), *rec[4:7]))
+        if mode.stop_here:
             break
-        grating = None
-        if shape.diffractive:
-            # m λ/(2π) ∇φ with ∇φ = 2 dφ/du (x, y, 0): finite at r = 0 (S16–S17).
-            g = shape.order * lam_mm / math.pi * phase_slope(u, lens.phase[s])
-            grating = (g * hx, g * hy)
-        if fast and kernel.ratio_refraction and grating is None:
-            mu = _per_ray(ratio[s], rays.wavelength, wl_select)
-            d_out, cos2_in, cos2_out, tir = refract_ratio_xyz((dx, dy, dz), normal, mu)
-        else:
-            n1 = _per_ray(lens.index[s], rays.wavelength, wl_select)
-            inv_n2 = _per_ray(inv_index[s + 1], rays.wavelength, wl_select)
-            d_out, cos2_in, cos2_out, tir = bend_xyz((dx, dy, dz), normal, n1, inv_n2, grating)
-        status, ok = _fail(status, ok, tir, Status.TIR, shortcuts)
-        failed_at = _first_failure(failed_at, ok, s)
-        if record:
-            rec = ((hx, hy, hz), (dx, dy, dz), d_out, normal)
-            if frames is not None:
-                o, r = frames.origin[s], frames.rotation[s]
-                rec = (to_global(rec[0], o, r),) + tuple(to_global(v, None, r) for v in rec[1:])
-            hits.append(SurfaceHit(*(stack(v) for v in rec), t, cos2_in, cos2_out))
-        if shortcuts and bool(ok.all()):
-            (x, y, z), (dx, dy, dz) = (hx, hy, hz), d_out
-        else:
-            x, y, z = torch.where(ok, hx, x), torch.where(ok, hy, y), torch.where(ok, hz, z)
-            # Failed rays keep their last valid position and continue as placeholders along the axis.
-            dx, dy, dz = (torch.where(ok, d_out[0], 0.0), torch.where(ok, d_out[1], 0.0),
-                          torch.where(ok, d_out[2], 1.0))
-        if frames is not None:
-            x, y, z = to_global((x, y, z), frames.origin[s], frames.rotation[s])
-            dx, dy, dz = to_global((dx, dy, dz), None, frames.rotation[s])
     else:
-        # Flat image surface at the end of the last gap (with a placement: in the image frame, whose
-        # x, y are reported, at the nominal image z).
-        image_z = vertex[-1]
-        if frames is not None:
-            x, y, z = to_local((x, y, z), frames.origin[-1], frames.rotation[-1])
-            dx, dy, dz = to_local((dx, dy, dz), None, frames.rotation[-1])
-            x, y, z = x, y, z + image_z
-        eps = torch.finfo(dz.dtype).eps
-        parallel = dz.abs() <= eps
-        t = (image_z - z) / torch.where(parallel, 1.0, dz)
-        status, ok = _fail(status, ok, parallel, Status.MISSED, shortcuts)
-        failed_at = _first_failure(failed_at, ok, lens.num_surfaces)
+        ray, book = image_step(geometry.vertex[-1], geometry.image_frame(), ray, book, lens.num_surfaces, shortcuts)
+    x, y, z, dx, dy, dz = ray
+    return RayTrace(pos=stack([x, y, z]), dir=stack([dx, dy, dz]), status=book.status.long(),
+                    backtrack=book.backtrack > 0, hits=tuple(hits),
+                    failed_at=None if book.failed_at is None else book.failed_at.long())
+
+
+Ray6 = tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor]
+"""A ray batch as its components (x, y, z, dx, dy, dz), each of shape (*B): position and direction."""
+
+
+@dataclass(frozen=True)
+class Book:
+    """What a trace records about its rays besides their values (no derivatives).
+
+    Attributes:
+        status: (*B) first failure code, in the rays' float dtype (int64 on return).
+        ok: (*B) bool, ``status == 0``: the live rays.
+        failed_at: (*B) surface of the first failure (float; −1: none), when recording, else None.
+        backtrack: (*B) float flag (0/1), some ray-marching distance was negative.
+    """
+
+    status: Tensor
+    ok: Tensor
+    failed_at: Tensor | None
+    backtrack: Tensor
+
+
+@dataclass(frozen=True)
+class SurfaceGeometry:
+    """One surface's prescription as the step sees it (0-d tensors unless stated).
+
+    Attributes:
+        curvature, conic: c (1/mm) and κ.
+        asphere: (A,) even-asphere coefficients; phase: (D,) diffractive phase coefficients.
+        vertex: axial vertex position from surface 1 (lens on its axis), mm.
+        semi_diameter: clear semi-aperture, mm.
+        origin, rotation: (3,), (3, 3) the surface frame of a placed lens (``optics.placement``), else None.
+    """
+
+    curvature: Tensor
+    conic: Tensor
+    asphere: Tensor
+    phase: Tensor
+    vertex: Tensor
+    semi_diameter: Tensor
+    origin: Tensor | None = None
+    rotation: Tensor | None = None
+
+
+@dataclass(frozen=True)
+class LensGeometry:
+    """Where every surface sits: vertex positions (S+1,) and the frames of a placed lens, else None."""
+
+    lens: Lens
+    vertex: Tensor
+    frames: Frames | None
+
+    def surface(self, s: int) -> SurfaceGeometry:
+        lens, f = self.lens, self.frames
+        return SurfaceGeometry(lens.curvature[s], lens.conic[s], lens.asphere[s], lens.phase[s], self.vertex[s],
+                               lens.semi_diameter[s], None if f is None else f.origin[s],
+                               None if f is None else f.rotation[s])
+
+    def image_frame(self) -> tuple[Tensor, Tensor] | None:
+        """(origin (3,), rotation (3, 3)) of the image surface of a placed lens, else None."""
+        return None if self.frames is None else (self.frames.origin[-1], self.frames.rotation[-1])
+
+
+def lens_geometry(lens: Lens) -> LensGeometry:
+    """Vertex positions and, for a decentered or tilted lens, the surface frames (``optics.placement``);
+    a lens on its axis skips every transform (the symmetric fast path)."""
+    frames = None if lens.placement is None else surface_frames(lens.thickness, lens.placement)
+    return LensGeometry(lens, lens.vertex_z(), frames)
+
+
+@dataclass(frozen=True)
+class StepMode:
+    """How ``surface_step`` treats one surface (static).
+
+    Attributes:
+        shape: the surface's kind and flags.
+        stop_here: the trace ends on this surface (``upto``): the rays are not bent.
+        record: return the ``SurfaceHit`` components.
+        near_only: a closed-form quadric with 1 + κ ≥ 0, decided by the caller (``KernelOptions``).
+        ratio: refract with one ratio n/n' per ray (``media`` is then ``(mu,)``).
+        newton_iterations: iteration cap of the asphere intersection.
+        shortcuts: eager, nothing watching (see ``_trace``).
+    """
+
+    shape: SurfaceShape
+    stop_here: bool = False
+    record: bool = False
+    near_only: bool = False
+    ratio: bool = False
+    newton_iterations: int = NEWTON_ITERATIONS
+    shortcuts: bool = False
+
+
+def surface_step(s: int, geo: SurfaceGeometry, ray: Ray6, media: tuple[Tensor, ...], book: Book, mode: StepMode,
+                 ) -> tuple[Ray6, Book, tuple | None]:
+    """Carry rays from the previous surface (or object space) to surface ``s`` and bend them there.
+
+    Args:
+        geo: the surface's prescription.
+        ray: (x, y, z, dx, dy, dz), each (*B), global coordinates.
+        media: per ray (*B): ``(n, 1/n')`` (plus λ in mm for a diffractive surface), or ``(n/n',)``
+            with ``mode.ratio``; empty with ``mode.stop_here``.
+        book: the rays' failure bookkeeping so far.
+
+    Returns:
+        The rays after the surface (failed rays keep their last valid position and travel on as
+        placeholders along the axis; on the stop surface of ``upto``: the hits, not bent), the
+        bookkeeping, and with ``mode.record`` the hit's components ``((hx, hy, hz), (dx, dy, dz) in,
+        d_out, normal, t, cos2_in, cos2_out, meets)`` in global coordinates (``meets``: bool, the ray
+        meets the surface and ``t`` is its distance, else ``t`` is a placeholder 0), else None.
+    """
+    shape, shortcuts = mode.shape, mode.shortcuts
+    status, ok, failed_at, backtrack = book.status, book.ok, book.failed_at, book.backtrack
+    x, y, z, dx, dy, dz = ray
+    c, k = geo.curvature, geo.conic
+    placed = geo.rotation is not None
+    if placed:
+        x, y, z = to_local((x, y, z), geo.origin, geo.rotation)
+        dx, dy, dz = to_local((dx, dy, dz), None, geo.rotation)
+        lz = z
+    else:
+        lz = z - geo.vertex
+    if shape.kind == "asphere":
+        t, defined, converged = asphere_xyz((x, y, lz), (dx, dy, dz), c, k, geo.asphere,
+                                            iterations=mode.newton_iterations)
+        status, ok = _fail(status, ok, ~defined, Status.MISSED, shortcuts)
+        status, ok = _fail(status, ok, ~converged, Status.NEWTON, shortcuts)
+        meets = converged
+    else:
+        if mode.near_only:
+            t, hit = quadric_near_xyz((x, y, lz), (dx, dy, dz), c, k)
+        else:
+            t, hit = quadric_flag_xyz((x, y, lz), (dx, dy, dz), c, k, shortcuts=shortcuts)
+        status, ok = _fail(status, ok, hit == 0, Status.MISSED, shortcuts)
+        meets = hit > 0
+    if s > 0:
         backtrack = _flag(backtrack, ok, t < 0, shortcuts)
-        x, y, z = torch.where(ok, x + t * dx, x), torch.where(ok, y + t * dy, y), torch.where(ok, z + t * dz, z)
-    return RayTrace(pos=stack([x, y, z]), dir=stack([dx, dy, dz]), status=status.long(),
-                    backtrack=backtrack > 0, hits=tuple(hits),
-                    failed_at=None if failed_at is None else failed_at.long())
+    hx, hy, hz = x + t * dx, y + t * dy, lz + t * dz
+    u = hx * hx + hy * hy
+    if shape.clip:
+        status, ok = _fail(status, ok, u > geo.semi_diameter ** 2, Status.CLIPPED, shortcuts)
+    failed_at = _first_failure(failed_at, ok, s)
+    if shape.kind == "asphere":
+        _, dz_du, _ = sag(u, c, k, geo.asphere)
+        normal = normal_xyz(hx, hy, dz_du)
+    elif shape.kind == "conic":
+        normal = conic_normal_xyz(hx, hy, hz, c, k)
+    else:  # sphere or plane: (−cx, −cy, 1 − cz) is a unit vector on the surface, no normalisation
+        normal = (-c * hx, -c * hy, 1.0 - c * hz)
+    if not placed:
+        hz = hz + geo.vertex
+    if mode.stop_here:
+        x, y, z = torch.where(ok, hx, x), torch.where(ok, hy, y), torch.where(ok, hz, z)
+        if placed:
+            x, y, z = to_global((x, y, z), geo.origin, geo.rotation)
+            dx, dy, dz = to_global((dx, dy, dz), None, geo.rotation)
+        return (x, y, z, dx, dy, dz), Book(status, ok, failed_at, backtrack), None
+    grating = None
+    if shape.diffractive:
+        # m λ/(2π) ∇φ with ∇φ = 2 dφ/du (x, y, 0): finite at r = 0 (S16–S17).
+        g = shape.order * media[2] / math.pi * phase_slope(u, geo.phase)
+        grating = (g * hx, g * hy)
+    if mode.ratio and grating is None:
+        d_out, cos2_in, cos2_out, tir = refract_ratio_xyz((dx, dy, dz), normal, media[0])
+    else:
+        d_out, cos2_in, cos2_out, tir = bend_xyz((dx, dy, dz), normal, media[0], media[1], grating)
+    status, ok = _fail(status, ok, tir, Status.TIR, shortcuts)
+    failed_at = _first_failure(failed_at, ok, s)
+    rec = None
+    if mode.record:
+        rec = ((hx, hy, hz), (dx, dy, dz), d_out, normal)
+        if placed:
+            rec = (to_global(rec[0], geo.origin, geo.rotation),) + tuple(to_global(v, None, geo.rotation)
+                                                                         for v in rec[1:])
+        rec = rec + (t, cos2_in, cos2_out, meets)
+    if shortcuts and bool(ok.all()):
+        (x, y, z), (dx, dy, dz) = (hx, hy, hz), d_out
+    else:
+        x, y, z = torch.where(ok, hx, x), torch.where(ok, hy, y), torch.where(ok, hz, z)
+        # Failed rays keep their last valid position and continue as placeholders along the axis.
+        dx, dy, dz = (torch.where(ok, d_out[0], 0.0), torch.where(ok, d_out[1], 0.0),
+                      torch.where(ok, d_out[2], 1.0))
+    if placed:
+        x, y, z = to_global((x, y, z), geo.origin, geo.rotation)
+        dx, dy, dz = to_global((dx, dy, dz), None, geo.rotation)
+    return (x, y, z, dx, dy, dz), Book(status, ok, failed_at, backtrack), rec
+
+
+def image_step(image_z: Tensor, frame: tuple[Tensor, Tensor] | None, ray: Ray6, book: Book, num_surfaces: int,
+               shortcuts: bool = False) -> tuple[Ray6, Book]:
+    """Carry rays to the flat image surface at ``image_z`` (the end of the last gap); with a placement
+    (``frame``: ``LensGeometry.image_frame``) in the image frame, whose x, y are reported, at the
+    nominal image z."""
+    status, ok, failed_at, backtrack = book.status, book.ok, book.failed_at, book.backtrack
+    x, y, z, dx, dy, dz = ray
+    if frame is not None:
+        x, y, z = to_local((x, y, z), frame[0], frame[1])
+        dx, dy, dz = to_local((dx, dy, dz), None, frame[1])
+        x, y, z = x, y, z + image_z
+    eps = torch.finfo(dz.dtype).eps
+    parallel = dz.abs() <= eps
+    t = (image_z - z) / torch.where(parallel, 1.0, dz)
+    status, ok = _fail(status, ok, parallel, Status.MISSED, shortcuts)
+    failed_at = _first_failure(failed_at, ok, num_surfaces)
+    backtrack = _flag(backtrack, ok, t < 0, shortcuts)
+    x, y, z = torch.where(ok, x + t * dx, x), torch.where(ok, y + t * dy, y), torch.where(ok, z + t * dz, z)
+    return (x, y, z, dx, dy, dz), Book(status, ok, failed_at, backtrack)
 
 
 @dataclass(frozen=True)
@@ -324,16 +464,16 @@ def _chunked(lens: Lens, rays: Rays, pos: Tensor) -> bool:
     or functorch transform watching (the optimizer's paths stay one call)."""
     if pos.numel() < 6 * CHUNK_RAYS or pos.device.type != "cpu" or torch.compiler.is_compiling():
         return False
-    from torch._C._functorch import is_functorch_wrapped_tensor
-    from torch.autograd.forward_ad import unpack_dual
+    return not carries_derivatives(pos, rays.dir, rays.wavelength, *lens_tensors(lens))
 
-    tensors = [pos, rays.dir, rays.wavelength]
+
+def lens_tensors(lens: Lens) -> list[Tensor]:
+    """Every tensor of ``lens``, its placement's included."""
+    out = []
     for holder in (lens, lens.placement):
         if holder is not None:
-            tensors += [v for f in dataclasses.fields(holder) if isinstance(v := getattr(holder, f.name), Tensor)]
-    grad = torch.is_grad_enabled()
-    return not any((grad and t.requires_grad) or is_functorch_wrapped_tensor(t) or unpack_dual(t).tangent is not None
-                   for t in tensors)
+            out += [v for f in dataclasses.fields(holder) if isinstance(v := getattr(holder, f.name), Tensor)]
+    return out
 
 
 def _trace_in_chunks(lens: Lens, rays: Rays, pos: Tensor, dir: Tensor, **kwargs) -> RayTrace:

@@ -144,12 +144,20 @@ def _inscribed_width(y0: Tensor, b: Tensor, lo: Tensor, hi: Tensor, container: t
     Scaling x by B/A turns the container into a circle of radius B. The ellipse x² = a'²(1 − u²/b²),
     u = y − y0, stays inside x² + (u + δ)² ≤ B² (δ = y0 − y_k) while k = a'²/b² ≤ the larger root of
     b² k² + (δ² − b² − B²) k + B² = 0, i.e. k = (b² + B² − δ² + √(PQ)) / 2b² with
-    P = (B − b − |δ|)(B − b + |δ|), Q = (B + b)² − δ². P = 0 when both touch at an end of the y extent.
+    P = (B − b − |δ|)(B − b + |δ|), Q = (B + b)² − δ². P = 0 when both touch at an end of the y extent
+    (the extent [lo, hi] lies inside the container's, [y_k − B, y_k + B]).
     """
     y_k, big_a, big_b = container
     delta = y0 - y_k
-    far = torch.maximum((hi - y_k).abs(), (lo - y_k).abs())  # = b + |δ|, exactly 0 gap when touching
-    p = (big_b - far) * (big_b - b + delta.abs())
+    # B − max(|hi − y_k|, |lo − y_k|) (= B − b − |δ|) as the smaller gap between the extent and the
+    # container's edges: exactly 0 where the extent ends on an edge (hi is y_k + B itself, or lo is
+    # y_k − B), as it does for the pupil ellipse and for a held ray. Written as B − |hi − y_k| it is
+    # ±eps there, and √(P Q) turns that into noise of √eps (1e-9 in the pupil factors).
+    # A held ray ends the extent on the disc's edge up to rounding (its height comes from another
+    # computation): gaps within rounding of the edges are that same tangency, snapped to 0.
+    gap = torch.minimum((y_k + big_b) - hi, lo - (y_k - big_b))
+    gap = torch.where(gap.abs() <= 64 * torch.finfo(gap.dtype).eps * (y_k.abs() + big_b), torch.zeros_like(gap), gap)
+    p = gap * (big_b - b + delta.abs())
     q = (big_b + b) ** 2 - delta**2
     tiny = torch.finfo(b.dtype).tiny
     b_safe = b.clamp_min(tiny**0.25)

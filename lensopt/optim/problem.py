@@ -22,12 +22,14 @@ from lensopt.errors import LensoptError, SpecError
 from lensopt.imaging.camera import Camera
 from lensopt.materials import Material, design_catalog
 from lensopt.materials.glass_space import GlassMesh, GlassSpace, glass_mesh, glass_space
-from lensopt.optics.bundle import Bundle, trace_bundle
+from lensopt.optics.bundle import Bundle, Launch, PupilShape, launch_bundle, trace_bundle
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling
+from lensopt.optics.transforms import carries_derivatives
 from lensopt.optim import residuals
 from lensopt.optim.image_objective import ImageObjective
+from lensopt.optim.jacobian import staged_jacobian
 from lensopt.optim.rays import head, with_rim
 from lensopt.optim.schedule import schedule_weight
 from lensopt.optim.settings import ImageSettings, OptimizeSettings
@@ -167,6 +169,7 @@ class Problem:
             mode = "scalar" if (method or self.opt.optimizer) == "adam" else "gtra"
             self.image = ImageObjective(setup.camera, self.opt.image or ImageSettings(), mode=mode,
                                         dtype=image_dtype)
+        self._shape_memo: tuple[Tensor, PupilShape] | None = None
         self.slices = self._layout()
         self.size = max((sl.stop for sl in self.slices.values()), default=0)
 
@@ -199,8 +202,30 @@ class Problem:
         """The solved lens for θ and whether its solves were well posed."""
         return apply_solves(self.param.lens(theta), self.system, self.solves, defocus=self.defocus)
 
-    def bundle(self, lens: Lens) -> Bundle:
-        return trace_bundle(lens, self.system, self.pupil, half_pupil=self.sampling.half, record=True)
+    def bundle(self, lens: Lens, theta: Tensor | None = None) -> Bundle:
+        """The optimization rays of ``lens`` traced (``record``); with ``theta`` (the variables ``lens``
+        was made from) the detached aiming solves are taken from, or kept for, that θ (``solved``)."""
+        bundle = trace_bundle(lens, self.system, self.pupil, half_pupil=self.sampling.half, record=True,
+                              solved=self.solved_shape(theta))
+        self._remember(theta, bundle.shape)
+        return bundle
+
+    def launch(self, lens: Lens, theta: Tensor | None = None) -> Launch:
+        """The optimization rays of ``bundle`` before their trace (``optim.jacobian``'s stage A)."""
+        return launch_bundle(lens, self.system, self.pupil, half_pupil=self.sampling.half,
+                             solved=self.solved_shape(theta))
+
+    def solved_shape(self, theta: Tensor | None) -> PupilShape | None:
+        """The pupil shape last computed at exactly this θ (its detached aiming solves are a function of
+        θ alone, so reusing them changes no number: ``pupil_shape``), else None."""
+        memo = self._shape_memo
+        if theta is None or memo is None or not torch.equal(memo[0], theta.detach()):
+            return None
+        return memo[1]
+
+    def _remember(self, theta: Tensor | None, shape: PupilShape | None) -> None:
+        if theta is not None and shape is not None and not carries_derivatives(theta):
+            self._shape_memo = (theta.detach().clone(), shape)
 
     def gap_bounds(self, lens: Lens) -> tuple[Tensor, Tensor]:
         """(S,), (S,) lower and upper t_z bounds per gap (mm), relative to centre thickness in glass."""
@@ -274,12 +299,24 @@ class Problem:
             out[name] = term.residual(ctx) * w
         return out
 
+    def hit_fields(self, bundle: Bundle) -> set[str]:
+        """The recorded hit fields whose derivatives the active terms read at ``bundle`` (``Term.reads``)."""
+        return {f for name, term in TERMS.items() if term.weight(self) is not None for f in term.reads(bundle)}
+
     def residuals(self, theta: Tensor) -> Tensor:
         """(M,) ℓ(θ): the one residual function (pure in θ)."""
         return torch.cat(list(self.terms(theta).values()))
 
     def jacobian(self, theta: Tensor) -> tuple[Tensor, Tensor]:
-        """(M, N) Jacobian by forward-mode AD (``torch.func.jacfwd``) and ℓ(θ) (M,)."""
+        """(M, N) Jacobian by forward-mode AD and ℓ(θ) (M,): in stages (``optim.jacobian``) where they
+        apply, else ``torch.func.jacfwd`` over the whole residual function (the same derivatives)."""
+        staged = staged_jacobian(self, theta)
+        if staged is not None:
+            return staged
+        return self.jacobian_jacfwd(theta)
+
+    def jacobian_jacfwd(self, theta: Tensor) -> tuple[Tensor, Tensor]:
+        """(M, N) Jacobian by ``torch.func.jacfwd`` over ``residuals`` and ℓ(θ) (M,): the reference."""
         def both(t: Tensor) -> tuple[Tensor, Tensor]:
             r = self.residuals(t)
             return r, r
@@ -318,7 +355,7 @@ class Problem:
             if reason:
                 nan = torch.full((self.size,), math.nan, dtype=self.dtype, device=self.device)
                 return Evaluation(nan, False, reason, 0.0)
-            bundle = self.bundle(lens)
+            bundle = self.bundle(lens, theta)
             r = torch.cat(list(self._terms(theta, lens, bundle).values()))
             valid = float(bundle.result.valid.to(self.dtype).mean())
         if not bool(torch.isfinite(r).all()):

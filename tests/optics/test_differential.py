@@ -1,0 +1,113 @@
+"""The differential ray trace (``optics.differential``) against forward-mode AD of the trace itself.
+
+Reference: ``torch.func.jacfwd`` of ``trace(lens(θ), rays(θ), record=True)``, where θ holds every
+entry of the lens tensors (curvatures, conics, asphere and phase coefficients, thicknesses, indices)
+and two ray parameters (a shift of the launch heights and a tilt of the directions), so that every
+input the local derivatives take (per ray: position, direction, the two indices; per surface: the
+prescription and the vertex) carries a tangent. The values must be the trace's own (same step
+function); the tangents agree with jacfwd to rounding: ≤ 1e-12 of each field's largest tangent.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from pathlib import Path
+
+import pytest
+import torch
+
+from lensopt.optics.bundle import trace_bundle
+from lensopt.optics.differential import HIT_FIELDS, supported, trace_with_tangents
+from lensopt.optics.trace import Rays, trace
+from lensopt.spec import build, parse_spec
+
+ROOT = Path(__file__).resolve().parents[2]
+NAMES = ("curvature", "conic", "asphere", "phase", "thickness", "index")
+
+
+def _setup(path: Path, pupil_scale: float = 1.0):  # noqa: ANN202
+    model = build(parse_spec(tomllib.loads(path.read_text())), dtype=torch.float64)
+    lens = model.lens
+    pupil = torch.tensor([[0.0, 0.0], [0.0, 0.6], [0.0, -0.9], [0.7, 0.2], [0.5, -0.5]], dtype=torch.float64)
+    with torch.no_grad():
+        b = trace_bundle(lens, model.system, pupil_scale * pupil)
+    pos0, dir0 = torch.broadcast_tensors(b.rays.pos, b.rays.dir)
+    sizes = [getattr(lens, n).numel() for n in NAMES]
+
+    def lens_of(theta: torch.Tensor):  # noqa: ANN202
+        parts = torch.split(theta[:sum(sizes)], sizes)
+        shaped = {n: p.reshape(getattr(lens, n).shape) for n, p in zip(NAMES, parts, strict=True)}
+        return dataclasses.replace(lens, **shaped)
+
+    def rays_of(theta: torch.Tensor) -> Rays:
+        shift, tilt = theta[-2], theta[-1]
+        pos = pos0 + shift * torch.tensor([0.0, 1.0, 0.0], dtype=pos0.dtype)
+        d = dir0 + tilt * torch.tensor([1.0, 0.0, 0.0], dtype=dir0.dtype)
+        return Rays(pos, d / torch.linalg.vector_norm(d, dim=-1, keepdim=True), b.rays.wavelength)
+
+    theta = torch.cat([getattr(lens, n).reshape(-1) for n in NAMES] + [torch.zeros(2, dtype=torch.float64)])
+    return lens_of, rays_of, theta
+
+
+def _tangents(lens_of, rays_of, theta):  # noqa: ANN001, ANN202
+    lens, rays = lens_of(theta), rays_of(theta)
+    jl = torch.func.jacfwd(lambda t: tuple(getattr(lens_of(t), n) for n in NAMES))(theta)
+    jr = torch.func.jacfwd(lambda t: (rays_of(t).pos, rays_of(t).dir))(theta)
+    lens_dot = dataclasses.replace(lens, **dict(zip(NAMES, jl, strict=True)))
+    return lens, rays, lens_dot, Rays(jr[0], jr[1], rays.wavelength)
+
+
+CASES = {
+    "telephoto (even aspheres, plastics, IR filter)": (ROOT / "specs" / "telephoto_5p_tr080.toml", 1.0),
+    "hybrid triplet (sphere, conic, asphere, diffractive)": (ROOT / "tests" / "data" / "hybrid_triplet.toml", 1.0),
+    "Cooke triplet, pupil overfilled (rays fail)": (ROOT / "specs" / "cooke_triplet.toml", 4.0),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_tangents_equal_forward_mode_of_the_trace(case: str) -> None:
+    path, scale = CASES[case]
+    lens_of, rays_of, theta = _setup(path, scale)
+    lens, rays, lens_dot, rays_dot = _tangents(lens_of, rays_of, theta)
+    assert supported(lens)
+    result, dot = trace_with_tangents(lens, rays, lens_dot, rays_dot)
+    ref = trace(lens, rays, record=True)
+    # The values are the trace's: the same step function.
+    assert torch.equal(result.status, ref.status) and torch.equal(result.failed_at, ref.failed_at)
+    assert torch.equal(result.pos, ref.pos) and torch.equal(result.dir, ref.dir)
+
+    def fields(t):  # noqa: ANN001, ANN202
+        r = trace(lens_of(t), rays_of(t), record=True)
+        return (r.pos, r.dir) + tuple(getattr(h, f) for h in r.hits for f in sorted(HIT_FIELDS))
+
+    jac = torch.func.jacfwd(fields)(theta)
+    got = (dot.pos, dot.dir) + tuple(getattr(h, f) for h in dot.hits for f in sorted(HIT_FIELDS))
+    valid = ref.valid
+    if case.startswith("Cooke"):
+        assert 0 < int(valid.sum()) < valid.numel()  # some rays fail: their rows are held too
+    for k, (want, have) in enumerate(zip(jac, got, strict=True)):  # every ray, failed ones too
+        scale_k = float(want.abs().max()) or 1.0
+        assert float((want - have).abs().max()) <= 1e-12 * scale_k, (k, float((want - have).abs().max()), scale_k)
+
+
+def test_only_the_requested_hit_fields_get_tangents() -> None:
+    lens_of, rays_of, theta = _setup(ROOT / "specs" / "cooke_triplet.toml")
+    lens, rays, lens_dot, rays_dot = _tangents(lens_of, rays_of, theta)
+    _, full = trace_with_tangents(lens, rays, lens_dot, rays_dot)
+    _, part = trace_with_tangents(lens, rays, lens_dot, rays_dot, hit_fields=lambda r: ("cos2_out", "pos"))
+    for h_full, h_part in zip(full.hits, part.hits, strict=True):
+        assert h_part.normal is None and h_part.t is None and h_part.dir_out is None
+        assert torch.equal(h_part.cos2_out, h_full.cos2_out) and torch.equal(h_part.pos, h_full.pos)
+    assert torch.equal(part.pos, full.pos) and torch.equal(part.dir, full.dir)
+
+
+def test_a_placed_lens_is_refused() -> None:
+    from lensopt.optics.placement import no_placement
+
+    lens_of, rays_of, theta = _setup(ROOT / "specs" / "cooke_triplet.toml")
+    lens, rays, lens_dot, rays_dot = _tangents(lens_of, rays_of, theta)
+    placed = dataclasses.replace(lens, placement=no_placement(lens.num_surfaces, dtype=torch.float64))
+    assert not supported(placed)
+    with pytest.raises(ValueError, match="placement"):
+        trace_with_tangents(placed, rays, lens_dot, rays_dot)
