@@ -1,4 +1,4 @@
-"""System data of an imported CODE V file: aperture, fields, vignetting, spectrum (see ``codev_import``)."""
+"""System data of an imported CODE V file: aperture, fields, vignetting, spectrum (see ``codev.read``)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 from typing import Any
 
 from lensopt.errors import SpecError
-from lensopt.io.codev_syntax import Command
+from lensopt.interchange.codev.syntax import Command
 from lensopt.optics.paraxial import first_order
 from lensopt.spec.build import build
 from lensopt.spec.io import parse_spec

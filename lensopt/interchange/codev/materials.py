@@ -8,7 +8,7 @@ from typing import Any
 import torch
 
 from lensopt.errors import LensoptError, SpecError
-from lensopt.io.codev_names import fictitious_glass, find_codev_glass
+from lensopt.interchange.codev.names import fictitious_glass, find_codev_glass
 from lensopt.materials import CatalogGlass, material_from_name
 from lensopt.spec.build import resolve_material
 from lensopt.spec.models import ModelGlassSpec, TabulatedGlassSpec

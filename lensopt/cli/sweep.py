@@ -14,22 +14,16 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from lensopt.cli_common import (
-    JsonOpt,
-    SeedOpt,
-    console,
-    err_console,
-    handle_errors,
-    print_json,
-    report_signal,
-    state,
-)
+from lensopt.cli.common import JsonOpt, SeedOpt, console, err_console, handle_errors, print_json
+from lensopt.cli.signals import report_signal, signal_word, state
 from lensopt.errors import LensoptError
 
 if TYPE_CHECKING:
     from lensopt.study.sweep import Point, SweepEvent, SweepResult
 
-__all__ = ["SweepProgress", "register", "render_table"]
+__all__ = ["SweepProgress", "commands", "render_table"]
+
+commands = typer.Typer()  # its command, put in order by lensopt.cli.app
 
 
 def _fmt(v: Any) -> str:
@@ -152,65 +146,62 @@ def _check_scheduler(scheduler: str) -> str | None:
                        got=scheduler)
 
 
-def register(app: typer.Typer) -> None:
-    """``lensopt sweep``."""
+@commands.command("sweep", short_help="Run a spec over a grid of values with multi-start optimization (Dask or "
+                                     "serial); resumable.")
+@handle_errors
+def sweep(
+    spec: Annotated[Path, typer.Argument(help="Lens spec (.toml or .json) with vary lists and an optimize "
+                                         "section.")],
+    vary: Annotated[list[str], typer.Option("--vary", help="KEY=V1,V2,... or KEY=START:STOP:STEP (inclusive); "
+                                            "KEY a dotted path such as optimize.solves[0].value or "
+                                            "surfaces[3].thickness. Several: the full grid.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the sweep (resumed when it holds "
+                                         "the same sweep).")],
+    starts: Annotated[int, typer.Option("--starts", min=1, max=1000, help="Starts per point (start 0: the "
+                                        "spec as written).")] = 1,
+    perturb: Annotated[float, typer.Option("--perturb", min=0.0, help="Relative Gaussian perturbation of "
+                                           "the scaled variables for starts ≥ 1.")] = 0.05,
+    steps: Annotated[int | None, typer.Option("--steps", min=1, help="Optimizer steps (default: the "
+                                              "spec's).")] = None,
+    scheduler: Annotated[str, typer.Option("--scheduler", help="local (a Dask LocalCluster of --workers "
+                                           "processes), serial, or a Dask scheduler address.")] = "local",
+    workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="LocalCluster workers.")] = 2,
+    restart: Annotated[bool, typer.Option("--restart", help="Start over in a folder that holds another "
+                                          "sweep (its files are removed).")] = False,
+    esr_sampling: Annotated[str, typer.Option("--esr-sampling", help="Pupil sampling of the reported ESR.")]
+    = "rings:24",
+    seed: SeedOpt = 0,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress display.")] = False,
+    as_json: JsonOpt = False,
+) -> None:
+    """Optimize SPEC at every point of a grid of values (--vary), with --starts perturbed starts each;
+    keep the best start per point; write sweep.json, sweep.csv, best_<i>.json and sweep.png."""
+    from lensopt.optics.sampling import PupilSampling
+    from lensopt.spec import load_spec
+    from lensopt.study.keys import parse_vary
+    from lensopt.study.sweep import Settings, expand_grid, run_sweep
 
-    @app.command(short_help="Run a spec over a grid of values with multi-start optimization (Dask or serial); "
-                            "resumable.")
-    @handle_errors
-    def sweep(
-        spec: Annotated[Path, typer.Argument(help="Lens spec (.toml or .json) with vary lists and an optimize "
-                                             "section.")],
-        vary: Annotated[list[str], typer.Option("--vary", help="KEY=V1,V2,... or KEY=START:STOP:STEP (inclusive); "
-                                                "KEY a dotted path such as optimize.solves[0].value or "
-                                                "surfaces[3].thickness. Several: the full grid.")],
-        output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the sweep (resumed when it holds "
-                                             "the same sweep).")],
-        starts: Annotated[int, typer.Option("--starts", min=1, max=1000, help="Starts per point (start 0: the "
-                                            "spec as written).")] = 1,
-        perturb: Annotated[float, typer.Option("--perturb", min=0.0, help="Relative Gaussian perturbation of "
-                                               "the scaled variables for starts ≥ 1.")] = 0.05,
-        steps: Annotated[int | None, typer.Option("--steps", min=1, help="Optimizer steps (default: the "
-                                                  "spec's).")] = None,
-        scheduler: Annotated[str, typer.Option("--scheduler", help="local (a Dask LocalCluster of --workers "
-                                               "processes), serial, or a Dask scheduler address.")] = "local",
-        workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="LocalCluster workers.")] = 2,
-        restart: Annotated[bool, typer.Option("--restart", help="Start over in a folder that holds another "
-                                              "sweep (its files are removed).")] = False,
-        esr_sampling: Annotated[str, typer.Option("--esr-sampling", help="Pupil sampling of the reported ESR.")]
-        = "rings:24",
-        seed: SeedOpt = 0,
-        quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress display.")] = False,
-        as_json: JsonOpt = False,
-    ) -> None:
-        """Optimize SPEC at every point of a grid of values (--vary), with --starts perturbed starts each;
-        keep the best start per point; write sweep.json, sweep.csv, best_<i>.json and sweep.png."""
-        from lensopt.optics.sampling import PupilSampling
-        from lensopt.spec import load_spec
-        from lensopt.study.keys import parse_vary
-        from lensopt.study.sweep import Settings, expand_grid, run_sweep
-
-        sched = _check_scheduler(scheduler)
-        base = load_spec(spec)
-        try:
-            text = spec.read_text(encoding="utf-8")
-        except OSError as err:
-            raise LensoptError(f"cannot read the file: {err.strerror}", path=str(spec)) from None
-        PupilSampling.parse(esr_sampling, seed=seed, path="--esr-sampling")
-        varies = [parse_vary(v) for v in vary]
-        points = expand_grid(base, varies)
-        settings = Settings(starts=starts, sigma=perturb, steps=steps, seed=seed, esr_sampling=esr_sampling)
-        with SweepProgress(err_console, points, starts, enabled=not quiet) as progress:
-            result = run_sweep(base, text, varies, settings, output, scheduler=sched, workers=workers,
-                               restart=restart, spec_name=base.name or spec.name, callback=progress, points=points)
-        if as_json:
-            print_json({"output": str(output), "complete": result.complete, "interrupted": result.interrupted,
-                        "computed": result.computed, "skipped": result.skipped, "elapsed_s": result.elapsed_s,
-                        "keys": result.keys, "points": result.rows})
-        else:
-            render_table(console, result, output)
-        if result.interrupted:
-            state.signal_reported = False
-            raise typer.Exit(report_signal(f"{'terminated' if state.signal_exit == 143 else 'interrupted'}: "
-                                           f"{len(result.records)} of {len(points) * starts} tasks finished; "
-                                           f"run the same command again to resume"))
+    sched = _check_scheduler(scheduler)
+    base = load_spec(spec)
+    try:
+        text = spec.read_text(encoding="utf-8")
+    except OSError as err:
+        raise LensoptError(f"cannot read the file: {err.strerror}", path=str(spec)) from None
+    PupilSampling.parse(esr_sampling, seed=seed, path="--esr-sampling")
+    varies = [parse_vary(v) for v in vary]
+    points = expand_grid(base, varies)
+    settings = Settings(starts=starts, sigma=perturb, steps=steps, seed=seed, esr_sampling=esr_sampling)
+    with SweepProgress(err_console, points, starts, enabled=not quiet) as progress:
+        result = run_sweep(base, text, varies, settings, output, scheduler=sched, workers=workers,
+                           restart=restart, spec_name=base.name or spec.name, callback=progress, points=points)
+    if as_json:
+        print_json({"output": str(output), "complete": result.complete, "interrupted": result.interrupted,
+                    "computed": result.computed, "skipped": result.skipped, "elapsed_s": result.elapsed_s,
+                    "keys": result.keys, "points": result.rows})
+    else:
+        render_table(console, result, output)
+    if result.interrupted:
+        state.signal_reported = False
+        raise typer.Exit(report_signal(f"{signal_word()}: "
+                                       f"{len(result.records)} of {len(points) * starts} tasks finished; "
+                                       f"run the same command again to resume"))

@@ -1,5 +1,7 @@
-"""What every ``lensopt`` command shares (CLI layer): the consoles, option aliases, the error contract
-and signals. Light on purpose: nothing here imports torch, so ``lensopt --help`` starts fast.
+"""What every ``lensopt`` command shares (CLI layer): the consoles, option aliases and their parsing, the
+device and backend options, loading a lens, the error contract (``handle_errors``, ``LensoptGroup``) and
+output paths. Light on purpose: nothing here imports torch, so ``lensopt --help`` starts fast. Signals:
+``lensopt.cli.signals``.
 
 The contract (README, "Errors and exit codes"): 0 success; 2 a problem the user can fix, printed as one
 line ``error: path.to.field: what is wrong (got X)`` (bad input, usage errors, output paths, memory
@@ -9,16 +11,14 @@ the traceback). Never a traceback without ``--verbose``.
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import json
 import logging
 import os
-import signal
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
@@ -30,14 +30,17 @@ try:  # typer ≥ 0.20 vendors click
 except ImportError:  # pragma: no cover
     from click import exceptions as click_exc  # type: ignore[no-redef]
 
-from lensopt.cli_process import EX_SIGINT, EX_SIGTERM, Interrupted, Terminated, is_cli_process, state
+from lensopt.cli.signals import EX_SIGINT, command_signals, report_signal, state
 from lensopt.errors import LensoptError
-from lensopt.io.files import json_safe
+from lensopt.files import json_safe
 
-__all__ = ["AimOpt", "AimStepsOpt", "check_seed", "DeviceOpt", "EX_INTERNAL", "JsonOpt", "LensArg", "SamplingOpt",
-           "SeedOpt",
-           "Interrupted", "Terminated", "check_output", "console", "err_console", "handle_errors", "LensoptGroup",
-           "report_signal", "signals_deferred", "state", "print_json", "LowerLevelFormatter"]
+if TYPE_CHECKING:
+    from lensopt.spec import Model
+
+__all__ = ["AimOpt", "AimStepsOpt", "BackendOpt", "DeviceOpt", "EX_INTERNAL", "JsonOpt", "LensArg", "LensoptGroup",
+           "LowerLevelFormatter", "SamplingOpt", "SeedOpt", "check_aim", "check_aim_steps", "check_output",
+           "check_seed", "console", "err_console", "handle_errors", "load_model", "parse_frequencies",
+           "parse_sampling", "print_json", "with_backend"]
 
 EX_USAGE, EX_INTERNAL = 2, 70
 F = TypeVar("F", bound=Callable[..., Any])
@@ -65,6 +68,42 @@ SeedOpt = Annotated[int, typer.Option("--seed", callback=check_seed,
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object instead of tables.")]
 DeviceOpt = Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N | auto: where the lens is traced and the "
                                         "images are computed.")]
+BackendOpt = Annotated[str, typer.Option(
+    "--backend", help="Trace backend: auto (the compiled trace when `lensopt warmup` compiled this lens "
+    "structure, else eager) | eager | compiled.")]
+
+
+def load_model(path: Path, device: Any = None) -> Model:
+    """The built lens, its tensors on ``device`` (a torch.device; None: the CPU)."""
+    from lensopt.spec import build, load_spec
+
+    return build(load_spec(path), device=device)
+
+
+def parse_sampling(text: str, seed: int, option: str = "--sampling"):  # noqa: ANN201
+    from lensopt.optics.sampling import PupilSampling
+
+    return PupilSampling.parse(text, seed=seed, path=option)
+
+
+def check_aim(aim: str | None) -> str | None:
+    if aim is not None and aim not in ("none", "chief", "full"):
+        raise LensoptError("must be none, chief or full", path="--aim", got=aim)
+    return aim
+
+
+def check_aim_steps(steps: int | None) -> int | None:
+    if steps is not None and not 1 <= steps <= 100:
+        raise LensoptError("must be an integer from 1 to 100", path="--aim-steps", got=steps)
+    return steps
+
+
+def parse_frequencies(text: str, path: str) -> list[float]:
+    """Comma-separated frequencies (cycles/mm), e.g. ``--mtf 10,20``."""
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise LensoptError("expected comma-separated numbers (cycles/mm)", path=path, got=text) from None
 
 
 def _one_line(text: str) -> str:
@@ -112,127 +151,24 @@ def handle_errors(fn: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
-# ------------------------------------------------------------------------------------- signals
+def with_backend(fn: F) -> F:
+    """Run the command with its ``backend`` argument as the trace backend (``use_backend``) and report a
+    first compilation on stderr; goes under ``handle_errors`` so that a bad name is one line, exit 2."""
 
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        from lensopt.optics.backend import on_compile, use_backend  # torch: imported when a command runs
 
-def report_signal(line: str | None = None) -> int:
-    """Print the one line for the signal received (once) and return its exit code (130 or 143)."""
-    if not state.signal_reported:
-        state.signal_reported = True
-        text = line or ("terminated" if state.signal_exit == EX_SIGTERM else "interrupted")
-        err_console.print(text, highlight=False, markup=False, soft_wrap=True)
-    return state.signal_exit
+        remove = on_compile(lambda desc, s: err_console.print(
+            f"compiled the trace for {desc} in {s:.1f} s (first time on this machine; cached on disk)",
+            highlight=False))
+        try:
+            with use_backend(kwargs.get("backend", "auto")):
+                return fn(*args, **kwargs)
+        finally:
+            remove()
 
-
-# Raising from a signal handler is safe in Python code, not while a module is being imported: extension
-# modules run their initialisation through Python callbacks that cannot pass an exception on (torch's
-# pybind11 code then calls std::terminate — exit −6 —, numpy's cannot be imported again). A signal that
-# lands inside an import is delivered again RETRY_S later, until the import is over.
-RETRY_S = 0.01
-_retry_signal: list[int] = []
-_retrying: list[bool] = []  # per nested _signal_handlers: whether signals are retried (the real process)
-_unraisable_hooks: list[Any] = []  # the hook in force before the command's
-
-
-def _in_import(frame: Any) -> bool:
-    while frame is not None:
-        if frame.f_code.co_filename.startswith("<frozen importlib._bootstrap"):
-            return True
-        frame = frame.f_back
-    return False
-
-
-def _deliver(signum: int, frame: Any, exc: type[KeyboardInterrupt], code: int) -> None:
-    state.signal_exit, state.signal_received = code, True
-    if _retrying and _retrying[-1] and _in_import(frame):
-        _retry_signal[:] = [signum]
-        signal.setitimer(signal.ITIMER_REAL, RETRY_S)  # → _on_retry
-        return
-    raise exc()
-
-
-def _on_retry(signum: int, frame: Any) -> None:
-    """SIGALRM: deliver the deferred signal again, to whatever handler is in force now."""
-    if _retry_signal:
-        signal.raise_signal(_retry_signal.pop())
-
-
-def _on_unraisable(unraisable: Any) -> None:
-    """A signal's exception raised inside a finalizer (``__del__``, a weakref or gc callback), where Python
-    can only print it and drop it: deliver the signal again instead, outside the finalizer."""
-    exc = unraisable.exc_value
-    if isinstance(exc, Interrupted | Terminated) and _retrying and _retrying[-1]:
-        _retry_signal[:] = [signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT]
-        signal.setitimer(signal.ITIMER_REAL, RETRY_S)
-        return
-    (_unraisable_hooks[-1] if _unraisable_hooks else sys.__unraisablehook__)(unraisable)
-
-
-def _on_sigterm(signum: int, frame: Any) -> None:
-    _deliver(signum, frame, Terminated, EX_SIGTERM)
-
-
-def _on_sigint(signum: int, frame: Any) -> None:
-    _deliver(signum, frame, Interrupted, EX_SIGINT)  # not KeyboardInterrupt itself: see lensopt/cli_process.py
-
-
-@contextlib.contextmanager
-def _signal_handlers(retry: bool | None = None) -> Iterator[None]:
-    """SIGINT → Interrupted, SIGTERM → Terminated (both KeyboardInterrupts) while a command runs. With
-    ``retry`` (default: in the real ``lensopt`` process only, so that in-process runs keep their SIGALRM
-    and unraisable hook), a signal inside an import or a finalizer is delivered again when it can be
-    raised (SIGALRM, ``RETRY_S``)."""
-    retry = (is_cli_process() if retry is None else retry) and hasattr(signal, "setitimer")
-    handlers = [(signal.SIGINT, _on_sigint), (signal.SIGTERM, _on_sigterm)]
-    if retry:
-        handlers.append((signal.SIGALRM, _on_retry))
-    try:
-        old = {s: signal.signal(s, h) for s, h in handlers}
-    except ValueError:  # not the main thread (an embedding application): leave signals alone
-        yield
-        return
-    _retrying.append(retry)
-    if retry:
-        _unraisable_hooks.append(sys.unraisablehook)
-        sys.unraisablehook = _on_unraisable
-    try:
-        yield
-    finally:
-        if retry:
-            signal.setitimer(signal.ITIMER_REAL, 0)  # a retry not yet due: the exit code already says it
-            _retry_signal.clear()
-            sys.unraisablehook = _unraisable_hooks.pop()
-        _retrying.pop()
-        for s, h in old.items():
-            signal.signal(s, h)
-
-
-@contextlib.contextmanager
-def signals_deferred() -> Iterator[None]:
-    """Hold SIGINT and SIGTERM until the block ends (then the first one is acted on), e.g. while writing the
-    result. The Python handlers are swapped, not the thread's signal mask: a process-directed signal may
-    land on any thread (torch's workers), and a mask would be inherited by subprocesses."""
-    held: list[int] = []
-
-    def hold(signum: int, frame: Any) -> None:
-        held.append(signum)
-
-    try:
-        old = {s: signal.signal(s, hold) for s in (signal.SIGINT, signal.SIGTERM)}
-    except ValueError:  # not the main thread: leave signals alone
-        yield
-        return
-    try:
-        yield
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
-        if held:
-            handler = old[held[0]]
-            if callable(handler):
-                handler(held[0], None)
-            elif handler == signal.SIG_DFL:
-                signal.raise_signal(held[0])
+    return wrapper  # type: ignore[return-value]
 
 
 class LensoptGroup(TyperGroup):
@@ -254,7 +190,7 @@ class LensoptGroup(TyperGroup):
         code = 0
         state.signal_exit, state.signal_reported, state.signal_received, state.verbose = EX_SIGINT, False, False, False
         try:
-            with _signal_handlers():
+            with command_signals():
                 rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
             code = rv if isinstance(rv, int) and not isinstance(rv, bool) else 0
             if code == EX_SIGINT:  # typer turns a KeyboardInterrupt outside the commands into exit 130

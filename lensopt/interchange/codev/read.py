@@ -14,7 +14,7 @@ ray angle to the paraxial entrance pupil (also for finite objects), ``YIM`` the 
 ``YOB`` h becomes the angle atan(h/(d + z_EP)); ``FNO`` is EFL/EPD for an infinite object in air and
 the working f-number otherwise; ``NA``/``NAO`` give the paraxial marginal slope tan(asin(NA/n)) (as
 rayoptics' ``na2slp``). Files without lensopt's comments get ``aim = "chief"`` (CODE V aims real rays
-at the stop). HCO coefficients: see ``codev_export``.
+at the stop). HCO coefficients: see ``codev.write``.
 """
 
 from __future__ import annotations
@@ -25,9 +25,9 @@ from pathlib import Path
 from typing import Any
 
 from lensopt.errors import SpecError
-from lensopt.io.codev_materials import PrivateGlass, resolve_glass
-from lensopt.io.codev_syntax import Command, split_commands
-from lensopt.io.codev_system import system_from_codev
+from lensopt.interchange.codev.materials import PrivateGlass, resolve_glass
+from lensopt.interchange.codev.syntax import Command, split_commands
+from lensopt.interchange.codev.system import system_from_codev
 
 __all__ = ["CodevImport", "import_codev", "read_codev", "SOLVE_COMMANDS", "INFINITE_OBJECT"]
 
@@ -366,7 +366,7 @@ def _doe(st: _State, s: _Surface, extra: dict[str, Any], path: str) -> dict[str,
         raise SpecError(f"line {s.line}: a DIF DOE surface needs a construction wavelength HWL (nm)",
                         path=st.source)
     lam0_mm = s.hwl * 1e-6
-    # HCO Ck: OPD at HWL in lens units, coefficient of r^(2k): φ = 2π/λ0 · OPD (see codev_export).
+    # HCO Ck: OPD at HWL in lens units, coefficient of r^(2k): φ = 2π/λ0 · OPD (see codev.write).
     phase = {2 * k: c * st.scale ** (1 - 2 * k) * 2.0 * math.pi / lam0_mm for k, c in sorted(s.hco.items())}
     exact = extra.get("phase")
     if isinstance(exact, dict) and _same_phase(exact, phase):

@@ -1,4 +1,4 @@
-"""CODE V sequence-file syntax: splitting text into commands, and writing numbers.
+"""CODE V sequence-file syntax: splitting text into commands, and writing derived numbers.
 
 A ``.seq`` file is a list of commands, one or several per line separated by ``;``. ``!`` starts a
 comment, ``&`` at the end of a line continues the command on the next one, and strings are quoted
@@ -16,7 +16,7 @@ from typing import Any
 
 from lensopt.errors import SpecError
 
-__all__ = ["Command", "SeqFile", "split_commands", "fmt_exact", "fmt_derived", "EXTRAS_PREFIX"]
+__all__ = ["Command", "SeqFile", "split_commands", "fmt_derived", "EXTRAS_PREFIX"]
 
 EXTRAS_PREFIX = "! lensopt: "
 
@@ -126,16 +126,6 @@ def split_commands(text: str, *, source: str = "seq") -> SeqFile:
         for tokens in _split_tokens(pending, start, source):
             commands.append(Command(start, tuple(tokens)))
     return SeqFile(commands, extras)
-
-
-def fmt_exact(x: float) -> str:
-    """A number lensopt stores, written so that reading it back gives the same double (shortest
-    round-trip form, ``repr``)."""
-    x = float(x)
-    if not math.isfinite(x):
-        raise ValueError(f"cannot write {x} to a CODE V file")
-    text = repr(x)
-    return "0.0" if text == "-0.0" else text
 
 
 def fmt_derived(x: float) -> str:

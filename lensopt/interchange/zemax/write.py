@@ -6,7 +6,7 @@ What is written (ASCII text, which OpticStudio and the Python readers accept as 
   f-number is Zemax's image-space F/#, EFL/EPD); ``RAIM`` (aiming off for ``aim = "none"``, real
   aiming otherwise); ``FTYP 0|2 0 nfields nwaves`` (angle or paraxial image height), ``XFLN``/``YFLN``,
   ``FWGN``; vignetting as ``VDYN``/``VCYN``/``VCXN`` (VCY = (superior + inferior)/2,
-  VDY = (inferior − superior)/2, VCX = lateral; see ``zemax_system``); ``WAVM`` (µm) and ``PWAV``.
+  VDY = (inferior − superior)/2, VCX = lateral; see ``zemax.system``); ``WAVM`` (µm) and ``PWAV``.
 - ``SURF 0`` the object (``DISZ INFINITY`` or the distance); one ``SURF`` per lens surface with ``TYPE
   STANDARD`` (sphere, conic, plane), ``EVENASPH`` (``PARM 2…8`` = r⁴…r¹⁶) or ``BINARY_2`` (diffractive:
   ``PARM 0`` = order, the base asphere in ``PARM 1…8``, ``XDAT 1`` = terms, ``XDAT 2`` = normalization
@@ -31,9 +31,9 @@ from pathlib import Path
 from typing import Any
 
 from lensopt.errors import SpecError
-from lensopt.io.codev_syntax import fmt_exact
-from lensopt.io.files import write_text_atomic
-from lensopt.io.zemax_import import NOTE_PREFIX
+from lensopt.files import write_text_atomic
+from lensopt.interchange.numbers import fmt_exact
+from lensopt.interchange.zemax.syntax import NOTE_PREFIX
 from lensopt.materials import CatalogGlass, ModelGlass
 from lensopt.materials.agf import AgfGlass
 from lensopt.spec.build import build

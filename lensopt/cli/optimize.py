@@ -14,24 +14,16 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
-from lensopt.cli_common import (
-    JsonOpt,
-    SeedOpt,
-    check_output,
-    console,
-    err_console,
-    handle_errors,
-    print_json,
-    report_signal,
-    signals_deferred,
-    state,
-)
+from lensopt.cli.common import JsonOpt, SeedOpt, check_output, console, err_console, handle_errors, print_json
+from lensopt.cli.signals import report_signal, signal_word, signals_deferred, state
 from lensopt.errors import LensoptError
 
 if TYPE_CHECKING:
     from lensopt.optim.run import OptimizeResult, Progress
 
-__all__ = ["LiveProgress", "plain_line", "register", "render_summary", "summary"]
+__all__ = ["LiveProgress", "commands", "plain_line", "render_summary", "summary"]
+
+commands = typer.Typer()  # its command, put in order by lensopt.cli.app
 
 
 class LiveProgress:
@@ -171,76 +163,73 @@ def render_summary(console: Console, s: dict[str, Any]) -> None:
         console.print(f"[yellow]warning:[/] {s['warning']}")
 
 
-def register(app: typer.Typer) -> None:
-    """``lensopt optimize``."""
+@commands.command("optimize", short_help="Optimize a spec (LM or Adam); Ctrl-C or SIGTERM keeps the best lens.")
+@handle_errors
+def optimize(
+    spec: Annotated[Path, typer.Argument(help="Lens spec (.toml or .json) with vary lists and an optimize "
+                                         "section.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Where to write the optimized lens (.json).")],
+    optimizer: Annotated[str | None, typer.Option("--optimizer", help="lm | adam (default: the spec's).")] = None,
+    steps: Annotated[int | None, typer.Option("--steps", min=1, help="Steps (default: the spec's).")] = None,
+    seed: SeedOpt = 0,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live display.")] = False,
+    as_json: JsonOpt = False,
+    device: Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N | auto: where the optimization "
+                                        "runs.")] = "cpu",
+    jacobian: Annotated[str, typer.Option("--jacobian", help="eager | compiled (LM Jacobian; compiled: same "
+                                          "values, faster steps; built once per problem and machine, "
+                                          "minutes, then loaded).")] = "eager",
+    full_weight: Annotated[bool, typer.Option("--full-weight", help="No weight schedules: every constraint "
+                                              "group at the weight its schedule ends on from the first "
+                                              "step (to continue a written lens); the written lens keeps "
+                                              "the schedules.")] = False,
+    checkpoint: Annotated[Path | None, typer.Option("--checkpoint", help="restored: checkpoint folder.")] = None,
+    resume: Annotated[bool, typer.Option("--resume", help="restored: continue --checkpoint.")] = False,
+    log_dir: Annotated[Path | None, typer.Option("--log-dir", help="restored: TensorBoard folder.")] = None,
+) -> None:
+    """Levenberg–Marquardt (or Adam) for spot size with solves and constraints; Ctrl-C keeps the best lens."""
+    from lensopt.analysis.report import trace_report
+    from lensopt.design import build_problem
+    from lensopt.design import optimize as run_optimize
+    from lensopt.optics.sampling import PupilSampling
+    from lensopt.optim.report import constraint_report
+    from lensopt.spec import build, load_spec, save_json
 
-    @app.command(short_help="Optimize a spec (LM or Adam); Ctrl-C or SIGTERM keeps the best lens.")
-    @handle_errors
-    def optimize(
-        spec: Annotated[Path, typer.Argument(help="Lens spec (.toml or .json) with vary lists and an optimize "
-                                             "section.")],
-        output: Annotated[Path, typer.Option("--output", "-o", help="Where to write the optimized lens (.json).")],
-        optimizer: Annotated[str | None, typer.Option("--optimizer", help="lm | adam (default: the spec's).")] = None,
-        steps: Annotated[int | None, typer.Option("--steps", min=1, help="Steps (default: the spec's).")] = None,
-        seed: SeedOpt = 0,
-        quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live display.")] = False,
-        as_json: JsonOpt = False,
-        device: Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N | auto: where the optimization "
-                                            "runs.")] = "cpu",
-        jacobian: Annotated[str, typer.Option("--jacobian", help="eager | compiled (LM Jacobian; compiled: same "
-                                              "values, faster steps; built once per problem and machine, "
-                                              "minutes, then loaded).")] = "eager",
-        full_weight: Annotated[bool, typer.Option("--full-weight", help="No weight schedules: every constraint "
-                                                  "group at the weight its schedule ends on from the first "
-                                                  "step (to continue a written lens); the written lens keeps "
-                                                  "the schedules.")] = False,
-        checkpoint: Annotated[Path | None, typer.Option("--checkpoint", help="restored: checkpoint folder.")] = None,
-        resume: Annotated[bool, typer.Option("--resume", help="restored: continue --checkpoint.")] = False,
-        log_dir: Annotated[Path | None, typer.Option("--log-dir", help="restored: TensorBoard folder.")] = None,
-    ) -> None:
-        """Levenberg–Marquardt (or Adam) for spot size with solves and constraints; Ctrl-C keeps the best lens."""
-        from lensopt.analysis.report import trace_report
-        from lensopt.design import build_problem
-        from lensopt.design import optimize as run_optimize
-        from lensopt.optics.sampling import PupilSampling
-        from lensopt.optim.report import constraint_report
-        from lensopt.spec import build, load_spec, save_json
+    if output.suffix.lower() != ".json":
+        raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
+    check_output(output)
+    start_spec = load_spec(spec)
+    if start_spec.optimize is not None and start_spec.optimize.objective == "restored":
+        if full_weight:
+            raise LensoptError("applies to the spot and raw objectives (restored has no weight schedules)",
+                               path="--full-weight")
+        from lensopt.cli.restore import optimize_restored
 
-        if output.suffix.lower() != ".json":
-            raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
-        check_output(output)
-        start_spec = load_spec(spec)
-        if start_spec.optimize is not None and start_spec.optimize.objective == "restored":
-            if full_weight:
-                raise LensoptError("applies to the spot and raw objectives (restored has no weight schedules)",
-                                   path="--full-weight")
-            from lensopt.cli_restore import optimize_restored
-
-            return optimize_restored(start_spec, output, steps=steps, seed=seed, checkpoint=checkpoint, resume=resume,
-                                     device=device, log_dir=log_dir, quiet=quiet, as_json=as_json)
-        if jacobian == "compiled" and not quiet:
-            err_console.print("compiled LM Jacobian: loaded from this machine's package for the problem, or built at "
-                              "the first step of each phase when there is none (minutes of CPU; `lensopt "
-                              "warmup SPEC --jacobian` builds the first phase's ahead)", highlight=False)
-        try:
-            with LiveProgress(err_console, enabled=not quiet) as live:
-                result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live,
-                                      device=device, jacobian=jacobian, full_weight=full_weight)
-        except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the first step: the best lens is the start lens
-            with signals_deferred():
-                save_json(start_spec, output)
-            word = "terminated" if state.signal_exit == 143 else "interrupted"
-            raise typer.Exit(report_signal(f"{word} before the first step; wrote the start lens to {output}")) from None
-        with signals_deferred():  # a second signal waits until the file is complete
-            save_json(result.spec, output)  # atomic
-        sampling = PupilSampling.parse("rings:24", seed=seed)
-        final_problem = build_problem(result.spec, seed=seed)
-        s = summary(result, trace_report(build(start_spec), sampling), trace_report(build(result.spec), sampling),
-                    constraint_report(final_problem, final_problem.theta0, sampling), str(output))
-        if as_json:
-            print_json(s)
-        else:
-            render_summary(console, s)
-        if result.interrupted:  # the summary above says so
-            state.signal_reported = True
-            raise typer.Exit(state.signal_exit)
+        return optimize_restored(start_spec, output, steps=steps, seed=seed, checkpoint=checkpoint, resume=resume,
+                                 device=device, log_dir=log_dir, quiet=quiet, as_json=as_json)
+    if jacobian == "compiled" and not quiet:
+        err_console.print("compiled LM Jacobian: loaded from this machine's package for the problem, or built at "
+                          "the first step of each phase when there is none (minutes of CPU; `lensopt "
+                          "warmup SPEC --jacobian` builds the first phase's ahead)", highlight=False)
+    try:
+        with LiveProgress(err_console, enabled=not quiet) as live:
+            result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live,
+                                  device=device, jacobian=jacobian, full_weight=full_weight)
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the first step: the best lens is the start lens
+        with signals_deferred():
+            save_json(start_spec, output)
+        line = f"{signal_word()} before the first step; wrote the start lens to {output}"
+        raise typer.Exit(report_signal(line)) from None
+    with signals_deferred():  # a second signal waits until the file is complete
+        save_json(result.spec, output)  # atomic
+    sampling = PupilSampling.parse("rings:24", seed=seed)
+    final_problem = build_problem(result.spec, seed=seed)
+    s = summary(result, trace_report(build(start_spec), sampling), trace_report(build(result.spec), sampling),
+                constraint_report(final_problem, final_problem.theta0, sampling), str(output))
+    if as_json:
+        print_json(s)
+    else:
+        render_summary(console, s)
+    if result.interrupted:  # the summary above says so
+        state.signal_reported = True
+        raise typer.Exit(state.signal_exit)

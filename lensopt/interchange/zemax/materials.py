@@ -1,4 +1,4 @@
-"""Glasses of an imported Zemax file (see ``zemax_import``): AGF catalogs given by the user, lensopt's
+"""Glasses of an imported Zemax file (see ``zemax.read``): AGF catalogs given by the user, lensopt's
 catalogs (the ``GCAT`` vendors first; a name in several catalogs resolved by the ``GLAS`` line's nd/vd),
 Zemax model glasses (``___BLANK``), and one warning per AGF glass used outside its wavelength range."""
 

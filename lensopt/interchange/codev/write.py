@@ -26,7 +26,7 @@ What is written, and the CODE V conventions used:
   the Fraunhofer lines are added where fewer), as the seed does (S1.3.4).
 
 Numbers lensopt stores are written exactly (shortest round-trip form); numbers computed for CODE V
-(field values, HCO, a derived EPD) with 14 significant digits (see ``codev_syntax``). What CODE V has
+(field values, HCO, a derived EPD) with 14 significant digits (see ``codev.syntax``). What CODE V has
 no command for (ray aiming, exact relative fields, the lensopt definition of private glasses, clip
 and vary flags, sensor, RGB weights) goes into ``! lensopt:`` comment lines that the importer reads
 back only when they agree with the CODE V data.
@@ -44,9 +44,10 @@ import torch
 
 from lensopt import __version__
 from lensopt.errors import SpecError
-from lensopt.io.codev_names import codev_glass_name, private_name
-from lensopt.io.codev_syntax import EXTRAS_PREFIX, fmt_derived, fmt_exact
-from lensopt.io.files import write_text_atomic
+from lensopt.files import write_text_atomic
+from lensopt.interchange.codev.names import codev_glass_name, private_name
+from lensopt.interchange.codev.syntax import EXTRAS_PREFIX, fmt_derived
+from lensopt.interchange.numbers import fmt_exact
 from lensopt.materials import LINE_C_UM, LINE_D_UM, LINE_F_UM, LINE_G_UM, CatalogGlass, Material
 from lensopt.optics.paraxial import first_order
 from lensopt.spec.build import Model, build

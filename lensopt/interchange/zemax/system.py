@@ -1,4 +1,4 @@
-"""System data of an imported Zemax file: aperture, fields, vignetting, spectrum (see ``zemax_import``).
+"""System data of an imported Zemax file: aperture, fields, vignetting, spectrum (see ``zemax.read``).
 
 Zemax conventions taken (OpticStudio manual, "System Explorer"):
 
