@@ -3,7 +3,7 @@
     errors.py       LensoptError and its subclasses: a field path and the bad value
     resources.py    the memory budget checked before large allocations
     parallel.py     independent tasks serially or on Dask; torch.distributed (torchrun) set-up
-    files.py        atomic writes (temporary file + rename): the one atomic writer; json_safe
+    files.py        atomic writes of files and folders (temporary + rename): the one atomic writer; json_safe
     devices.py      ``--device`` names → torch.device
     checkpoint.py   run checkpoints (safetensors + JSON, atomic folder)
     materials/      dispersion, glass catalogs, AGF, runtime materials, glass space

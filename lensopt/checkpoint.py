@@ -7,8 +7,8 @@
       state.safetensors     optimizer moments, RNG states, LM damping ... (flat named tensors)
 
 No pickle: tensors live in safetensors, everything else in JSON, so loading a checkpoint never runs
-code. Writing is atomic: the folder is written beside the target under a temporary name, then
-renamed over it (the previous checkpoint is moved aside first and deleted after). A checkpoint
+code. Writing is atomic (``lensopt.files.atomic_folder``): the folder is written beside the target under a
+temporary name, then renamed over it (the previous checkpoint is moved aside first and deleted after). A checkpoint
 whose files do not match their recorded SHA-256, or whose fingerprint (lens structure + network
 configuration) differs from the run's, is refused with one ``CheckpointError``.
 """
@@ -18,8 +18,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,6 +25,7 @@ from typing import Any
 from torch import Tensor
 
 from lensopt.errors import LensoptError
+from lensopt.files import atomic_folder
 
 __all__ = ["Checkpoint", "CheckpointError", "save_checkpoint", "load_checkpoint", "fingerprint",
            "flatten_optimizer", "unflatten_optimizer", "lens_structure", "FORMAT"]
@@ -87,37 +86,14 @@ def save_checkpoint(path: str | os.PathLike[str], ckpt: Checkpoint) -> Path:
     target = Path(path)
     if target.exists() and not target.is_dir():
         raise CheckpointError("exists and is not a checkpoint folder", path=str(target))
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent))
-    old: Path | None = None
-    try:
+    with atomic_folder(target) as tmp:
         (tmp / "lens.json").write_text(ckpt.lens_json, encoding="utf-8")
         save_file(_tensors(ckpt.network), str(tmp / "network.safetensors"))
         save_file(_tensors(ckpt.state), str(tmp / "state.safetensors"))
         meta = {"format": FORMAT, "kind": ckpt.kind, "step": ckpt.step, "fingerprint": ckpt.fingerprint,
                 "meta": ckpt.meta, "sha256": {n: _sha(tmp / n) for n in _FILES}}
         (tmp / "meta.json").write_text(json.dumps(meta, indent=1, sort_keys=True), encoding="utf-8")
-        for n in (*_FILES, "meta.json"):
-            with open(tmp / n, "rb") as f:
-                os.fsync(f.fileno())
-            os.chmod(tmp / n, 0o666 & ~_umask())
-        os.chmod(tmp, 0o777 & ~_umask())
-        if target.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".old", dir=target.parent))
-            os.replace(target, old / "ckpt")
-        os.replace(tmp, target)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
     return target
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
 
 
 def load_checkpoint(path: str | os.PathLike[str], *, expect_fingerprint: str | None = None,

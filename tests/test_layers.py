@@ -14,8 +14,8 @@ the ranks, and there is no import cycle anywhere.
     3    analysis
     2    optics
     1    materials
-    0.5  leaves: resources, parallel, files, devices, checkpoint (they import nothing from lensopt but errors)
-    0    errors, the package root (``lensopt/__init__.py``: the version)
+    0.5  leaves: resources, parallel, devices, checkpoint (they import only rank 0)
+    0    errors, files (atomic writes), the package root (``lensopt/__init__.py``): they import nothing from lensopt
 
 Two packages on the same rank must not import each other. typer, rich and pydantic appear only in the
 cli and spec layers. The test reads every module's AST (no import side effects), so lazy imports inside
@@ -29,8 +29,8 @@ from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "lensopt"
 
-RANK = {"lensopt": 0, "errors": 0,
-        "resources": 0.5, "parallel": 0.5, "files": 0.5, "devices": 0.5, "checkpoint": 0.5,
+RANK = {"lensopt": 0, "errors": 0, "files": 0,
+        "resources": 0.5, "parallel": 0.5, "devices": 0.5, "checkpoint": 0.5,
         "materials": 1, "optics": 2, "analysis": 3, "imaging": 4, "plot": 4, "restore": 5, "optim": 6,
         "tolerance": 7, "spec": 8, "interchange": 8.1, "design": 8.2, "qa": 8.5, "study": 8.5,
         "cli": 9, "__main__": 9.5}
