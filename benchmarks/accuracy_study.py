@@ -128,7 +128,7 @@ def part_commands(repeats: int, lenses: list[str], only: list[str] | None, backe
     (default: the environment's)."""
     import tempfile
 
-    py = [sys.executable, "-c", "from lensopt.cli import app; app()"]
+    py = [sys.executable, "-c", "from lensopt.cli.app import app; app()"]
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "2")}
     if cache:
         env["TORCHINDUCTOR_CACHE_DIR"] = cache

@@ -14,7 +14,7 @@ import sys
 import time
 from pathlib import Path
 
-HELP = ("import sys; sys.argv = ['lensopt', '--help']\nfrom lensopt.cli import app\n"
+HELP = ("import sys; sys.argv = ['lensopt', '--help']\nfrom lensopt.cli.app import app\n"
         "try:\n    app()\nexcept SystemExit:\n    pass")
 COUNT = HELP + "\nprint(len(sys.modules), 'torch' in sys.modules, file=sys.stderr)"
 

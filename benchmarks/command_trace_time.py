@@ -49,7 +49,7 @@ def child(args: list[str]) -> None:
 
     backend.choose_backend = spy_choose
     backend.trace_with = bundle.trace_with = timed
-    from lensopt.cli import app
+    from lensopt.cli.app import app
 
     try:
         app(args, standalone_mode=False)

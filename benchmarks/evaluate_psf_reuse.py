@@ -25,9 +25,9 @@ from pathlib import Path
 
 import skimage
 
+from lensopt.files import write_text_atomic
 from lensopt.imaging.evaluate import evaluate, scene_source
 from lensopt.imaging.plan import PlanOptions
-from lensopt.io.files import write_text_atomic
 from lensopt.spec import build, camera_of, load_spec
 
 ROOT = Path(__file__).resolve().parents[1]

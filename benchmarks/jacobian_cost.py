@@ -164,7 +164,7 @@ def main() -> None:
         sys.stdout.flush()
         results["machine"]["loadavg_after"] = os.getloadavg()
         if args.json:  # after each problem: a long compile cut short keeps what was measured
-            from lensopt.io.files import write_text_atomic
+            from lensopt.files import write_text_atomic
 
             write_text_atomic(args.json, json.dumps(results, indent=2) + "\n")
     print(f"\nload average before/after: {results['machine']['loadavg_before']} / "

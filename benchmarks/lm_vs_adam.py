@@ -205,7 +205,7 @@ def main() -> None:
         print(f"\n{name}: lead over the best Adam {t_adam:.1f} s / {t_lm:.1f} s = **{t_adam / t_lm:.1f}×** sooner"
               + (f" (its Jacobian: {c['source']}, within the clock)" if c else ""))
     if args.json:
-        from lensopt.io.files import write_text_atomic
+        from lensopt.files import write_text_atomic
 
         write_text_atomic(args.json, json.dumps({
             "problem": args.problem, "variables": p.num_variables, "residuals": p.size, "budget_s": args.budget,
@@ -221,7 +221,7 @@ def main() -> None:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        from lensopt.io.files import atomic_path
+        from lensopt.files import atomic_path
 
         fig, ax = plt.subplots(figsize=(6.4, 4.2))
         for name, tr in runs.items():

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 from procmem import peak_rss_mb
 
-from lensopt.cli_imaging import parse_grid
+from lensopt.cli.simulate import parse_grid
 from lensopt.imaging.plan import PlanOptions, parse_effects
 from lensopt.imaging.simulate import plan_scene, run_plan
 from lensopt.spec import build, camera_of, load_spec

@@ -50,7 +50,7 @@ def _report():
         json.dump({{"peak_rss_mb": peak_rss_mb(), "torch_threads": t.get_num_threads() if t else None}}, f)
 
 atexit.register(_report)
-from lensopt.cli import app
+from lensopt.cli.app import app
 sys.argv[0] = "lensopt"
 app()
 """
@@ -209,7 +209,7 @@ def main() -> None:
     for k, v in compare.items():
         print(f"{k}: {v}")
     if a.json:
-        from lensopt.io.files import write_text_atomic
+        from lensopt.files import write_text_atomic
 
         write_text_atomic(a.json, json.dumps({"rows": rows, "ratios": ratios, "compare": compare,
                                               "load_before": load0, "load_after": load1, "repeats": a.repeats,

@@ -102,13 +102,14 @@ def main() -> None:
     start = _mb("VmRSS")
     import torch  # noqa: F401  (what every run imports first)
 
-    import lensopt.cli_imaging as ci
+    import lensopt.imaging.io as iio
     import lensopt.imaging.simulate as sm
-    from lensopt.cli import app
+    from lensopt.cli.app import app
 
     after_imports = _mb("VmRSS")
-    for name in ("read_image", "plan_scene", "run_plan", "write_image"):
-        watch(ci, name)
+    # lensopt.cli.simulate.run_simulate imports these when it runs: watch them where they are defined
+    for module, name in ((iio, "read_image"), (sm, "plan_scene"), (sm, "run_plan"), (iio, "write_image")):
+        watch(module, name)
     for name in ("compute_psfs", "build_psf_grid", "overlap_add_convolve"):
         watch(sm, name)
     out = Path(tempfile.mkdtemp(prefix="sim_mem_out_")) / "out.png"

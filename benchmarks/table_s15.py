@@ -139,7 +139,7 @@ def train(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str
 
 def _finished(ck: Path, steps: int) -> bool:
     """A checkpoint of a finished run (re-used, not trained again)."""
-    from lensopt.io.checkpoint import load_checkpoint
+    from lensopt.checkpoint import load_checkpoint
 
     return ck.exists() and load_checkpoint(ck).step == steps
 
@@ -398,8 +398,8 @@ def main() -> None:
                                  + tuple((f"raw_seed{s}", f"restored_seed{s}") for s in a.joint_seeds)
                                if x in rows and y in rows},
     }
-    from lensopt.io.checkpoint import load_checkpoint
-    from lensopt.io.files import write_text_atomic
+    from lensopt.checkpoint import load_checkpoint
+    from lensopt.files import write_text_atomic
 
     for name in (["restored", "spot", "raw", "restored_irm", "restored_polished"]
                  + [f"{n}_seed{s}" for s in a.extra_seeds for n in ("spot", "raw")]

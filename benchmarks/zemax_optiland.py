@@ -21,8 +21,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 warnings.simplefilter("ignore")
 
-from lensopt.io.zemax_export import export_zemax  # noqa: E402
-from lensopt.io.zemax_import import import_zemax  # noqa: E402
+from lensopt.interchange.zemax.read import import_zemax  # noqa: E402
+from lensopt.interchange.zemax.write import export_zemax  # noqa: E402
 from lensopt.optics.bundle import trace_bundle  # noqa: E402
 from lensopt.optics.paraxial import first_order  # noqa: E402
 from lensopt.optics.sampling import PupilSampling  # noqa: E402
@@ -60,7 +60,7 @@ def export_check() -> None:
     from optiland.materials import IdealMaterial
     from optiland.rays import RealRays
 
-    from lensopt.io.zemax_export import write_zemax
+    from lensopt.interchange.zemax.write import write_zemax
     from lensopt.spec.models import DiffractiveSurface
 
     print("| spec (exported) | EFL rel | EPD rel | same rays stopped | max image Δ (mm) |")

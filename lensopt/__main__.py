@@ -1,6 +1,17 @@
-"""``python -m lensopt`` (and ``torchrun ... -m lensopt``): the command line."""
+"""The ``lensopt`` command: ``python -m lensopt``, ``torchrun … -m lensopt`` and the console script
+(``[project.scripts]`` → ``main``)."""
 
-from lensopt.cli import app
+
+def main() -> None:
+    """Install the process's signal handling (``lensopt.cli.signals``) before anything slow is imported, then
+    run the command line."""
+    from lensopt.cli import signals
+
+    signals.install()
+    from lensopt.cli.app import app
+
+    app(prog_name="lensopt")
+
 
 if __name__ == "__main__":  # not when a worker process (Dask, multiprocessing spawn) imports this module
-    app(prog_name="lensopt")
+    main()

@@ -1,20 +1,25 @@
-"""Run independent tasks serially or on Dask (a fresh ``LocalCluster`` or an existing scheduler).
+"""Independent tasks serially or on Dask, and the set-up of a torch.distributed (torchrun) run.
 
-A leaf utility (it imports nothing else from lensopt) shared by the tolerance Monte Carlo and the design
-sweeps. Every task is ``fn(shared, item)``: ``shared`` is sent to each worker once, the items one by
-one. Results come back in the order of ``items`` whatever order the workers finish in, so a serial run
-and a distributed run give the same list; ``on_done`` sees each result as it arrives (to write it to
-disk or show progress).
+A leaf utility (it imports nothing else from lensopt but the errors). ``run_tasks`` is shared by the
+tolerance Monte Carlo and the design sweeps: every task is ``fn(shared, item)``; ``shared`` is sent to
+each worker once, the items one by one. Results come back in the order of ``items`` whatever order the
+workers finish in, so a serial run and a distributed run give the same list; ``on_done`` sees each
+result as it arrives (to write it to disk or show progress). ``init_distributed`` and
+``check_same_settings`` set up the data-parallel training runs (``train-irm``, the joint optimization).
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
+import os
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, TypeVar
 
-__all__ = ["dask_client", "run_tasks"]
+from lensopt.errors import LensoptError
+
+__all__ = ["dask_client", "run_tasks", "init_distributed", "check_same_settings"]
 
 S = TypeVar("S")
 T = TypeVar("T")
@@ -85,3 +90,38 @@ def run_tasks(fn: Callable[[S, T], R], items: Sequence[T], *, shared: S, schedul
             for f in futures:
                 f.cancel()
     return results
+
+
+def init_distributed(device: Any) -> tuple[int, int, str]:
+    """This process's ``(rank, world size, collective device)``: torchrun sets RANK/WORLD_SIZE (the process
+    group is gloo on the CPU, NCCL on CUDA); else ``(0, 1, "cpu")``, one process. ``device``: the
+    run's ``torch.device``. (``optim.joint.Dist(*init_distributed(device))`` is the run's ``Dist``.)"""
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world <= 1:
+        return 0, 1, "cpu"
+    import torch
+    import torch.distributed as dist
+
+    if not dist.is_initialized():
+        dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
+    rank = dist.get_rank()
+    where = f"cuda:{rank % torch.cuda.device_count()}" if device.type == "cuda" else "cpu"
+    return rank, dist.get_world_size(), where
+
+
+def check_same_settings(world: int, settings: dict[str, Any]) -> None:
+    """Every rank of a ``world``-process run must run the same command on the same spec: compare a hash of
+    ``settings`` across ranks (nothing to compare for one process)."""
+    if world <= 1:
+        return
+    import hashlib
+
+    import torch.distributed as tdist
+
+    h = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode()).hexdigest()
+    hashes: list[str] = [""] * world
+    tdist.all_gather_object(hashes, h)
+    if len(set(hashes)) > 1:
+        bad = [r for r, x in enumerate(hashes) if x != hashes[0]]
+        raise LensoptError(f"processes were started with different settings (ranks {bad} differ from rank 0); "
+                           "start every rank with the same command and spec", path="torchrun")

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.cli.app import app
 
 GOOD = """
 name = "cli test singlet"

@@ -1,4 +1,4 @@
-"""Plain-data reports of a traced lens (what ``lensopt trace --json`` and ``lensopt ray`` print).
+"""Plain-data reports of a traced lens (what ``lensopt trace --json`` (with ``--mtf``) and ``lensopt ray`` print).
 
 Units in reports: mm for lengths, µm for spot radii, nm for wavelengths, degrees for angles.
 The functions take any ``LensModel`` (a name, the traced lens and system, the media): ``lensopt.spec``'s
@@ -15,6 +15,7 @@ import torch
 
 from lensopt.analysis.field import field_summary
 from lensopt.analysis.spot import spot_stats
+from lensopt.errors import LensoptError
 from lensopt.materials import Material
 from lensopt.optics.bundle import pupil_shape, trace_bundle
 from lensopt.optics.lens import Lens, System
@@ -23,7 +24,7 @@ from lensopt.optics.sampling import PupilSampling, launch, pupil_grid
 from lensopt.optics.trace import REASONS, Rays, Status, trace
 from lensopt.optics.vignetting import apply_vignetting, outside_front_aperture
 
-__all__ = ["LensModel", "trace_report", "ray_report", "auto_semi_diameters", "prescription"]
+__all__ = ["LensModel", "trace_report", "ray_report", "mtf_report", "auto_semi_diameters", "prescription"]
 
 
 class LensModel(Protocol):
@@ -255,3 +256,19 @@ def ray_report(
         "failed_at_surface": None if status == 0 or failed_at < 0 else failed_at + 1,
         "backtracking": bool(result.backtrack.reshape(()).item()),
     }
+
+
+def mtf_report(model: LensModel, frequencies: list[float], *, method: str = "heuristic",
+               sampling: str = "rings:32") -> dict[str, Any]:
+    """MTF per field at ``frequencies`` (cycles/mm) as plain data (``trace --json --mtf``)."""
+    from lensopt.analysis.mtf import MTF_METHODS, lens_mtf  # PSF machinery: only when asked for
+
+    if method not in MTF_METHODS:
+        raise LensoptError(f"must be one of {', '.join(MTF_METHODS)}", path="--mtf-method", got=method)
+    if not frequencies or any(not (f >= 0 and math.isfinite(f)) for f in frequencies):
+        raise LensoptError("expected non-negative frequencies in cycles/mm, comma-separated", path="--mtf",
+                           got=frequencies)
+    nu = torch.tensor(frequencies, dtype=model.lens.dtype)
+    r = lens_mtf(model.lens, model.system, nu, method=method, sampling=sampling)
+    return {"method": method, "frequencies_per_mm": frequencies, "cutoff_per_mm": r.cutoff,
+            "rel_field": r.rel_field.tolist(), "sagittal": r.sagittal.tolist(), "tangential": r.tangential.tolist()}

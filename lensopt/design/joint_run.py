@@ -14,10 +14,7 @@ from typing import Any
 
 import torch
 
-from lensopt.design.setup import build_problem
-from lensopt.design.writeback import to_spec
-from lensopt.errors import LensoptError
-from lensopt.io.checkpoint import (
+from lensopt.checkpoint import (
     Checkpoint,
     CheckpointError,
     fingerprint,
@@ -27,6 +24,9 @@ from lensopt.io.checkpoint import (
     save_checkpoint,
     unflatten_optimizer,
 )
+from lensopt.design.setup import build_problem
+from lensopt.design.writeback import to_spec
+from lensopt.errors import LensoptError
 from lensopt.optim.irm import log_examples, make_optimizer
 from lensopt.optim.joint import Dist, RestoredObjective, evaluate_pair, joint_step
 from lensopt.optim.lm import LevenbergMarquardt, Trial

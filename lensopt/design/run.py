@@ -9,9 +9,10 @@ import torch
 
 from lensopt.design.setup import build_problem
 from lensopt.design.writeback import BoundGlass, bind_glasses, to_spec
+from lensopt.devices import resolve_device
 from lensopt.errors import LensoptError
 from lensopt.optim.problem import Problem
-from lensopt.optim.run import JACOBIANS, OptimizeResult, Progress, resolve_device, run_problem
+from lensopt.optim.run import JACOBIANS, OptimizeResult, Progress, run_problem
 from lensopt.spec.models import LensSpec
 
 __all__ = ["optimize"]

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from lensopt.errors import LensoptError
-from lensopt.io.files import atomic_path
+from lensopt.files import atomic_path
 from lensopt.resources import require
 
 log = logging.getLogger("lensopt")

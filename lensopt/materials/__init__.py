@@ -1,8 +1,11 @@
-"""Materials: dispersion models (catalog formulas, Hartmann from nd/vd/ΔPgF), vendor catalogs,
-design catalogs, and the runtime material objects a lens is built from (seed S1.1).
+"""Materials (seed S1.1): dispersion models, vendor and design catalogs, and the runtime material objects a
+lens is built from. (``tools/generate_glasses.py`` regenerates ``data/glasses.json``.)
 
-Layers: :mod:`.dispersion` holds pure torch functions; :mod:`.catalog` the vendor data (lazy,
-cached) and name lookup; :mod:`.material` the small frozen objects the spec builder uses.
+    dispersion.py    pure torch dispersion formulas: catalog formulas, Hartmann from nd/vd/ΔPgF
+    catalog.py       vendor glasses (``data/``, lazy, cached), name lookup, design catalogs
+    agf.py           Zemax AGF glass catalogs: reading them, evaluating their formulas
+    material.py      runtime materials (air, catalog, model and tabulated glasses)
+    glass_space.py   glass variables: whitened design catalog, pruned Delaunay mesh (S2.1.2, S2.2.4)
 """
 
 from lensopt.materials.catalog import (

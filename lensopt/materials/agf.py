@@ -42,7 +42,6 @@ from torch import Tensor
 
 from lensopt.errors import MaterialError
 from lensopt.materials.catalog import normalize_name
-from lensopt.materials.dispersion import LINE_C_UM, LINE_D_UM, LINE_F_UM
 from lensopt.materials.material import Material, _check_wavelength_tensor
 
 __all__ = ["AGF_FORMULAS", "AgfEntry", "AgfGlass", "agf_index", "read_agf", "agf_glass", "decode_text"]
@@ -289,10 +288,3 @@ def agf_glass(path: str | os.PathLike[str], name: str) -> AgfGlass:
         hint = f"; close: {', '.join(glasses[c].name for c in close)}" if close else ""
         raise MaterialError(f"glass {name!r} is not in the AGF catalog {path}{hint}", path=str(path))
     return AgfGlass(entry)
-
-
-def fraunhofer_check(entry: AgfEntry) -> tuple[float, float]:
-    """(nd, vd) computed from the formula: a consistency check against the catalog's NM values."""
-    wl = torch.tensor([LINE_D_UM, LINE_F_UM, LINE_C_UM], dtype=torch.float64)
-    n = agf_index(entry.formula, torch.tensor(entry.coefficients, dtype=torch.float64), wl).tolist()
-    return n[0], (n[0] - 1.0) / (n[1] - n[2])

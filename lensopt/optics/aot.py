@@ -36,7 +36,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
-from lensopt.io.files import atomic_path
+from lensopt.files import atomic_path
 from lensopt.optics.intersect import NEWTON_ITERATIONS
 from lensopt.optics.lens import Lens
 from lensopt.optics.trace import Rays, RayTrace, SurfaceHit, trace

@@ -39,7 +39,6 @@ import json
 import logging
 import math
 import os
-import tempfile
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -50,6 +49,7 @@ import torch.autograd.forward_ad as fwad
 from torch import Tensor
 
 from lensopt.errors import LensoptError
+from lensopt.files import write_text_atomic
 from lensopt.optics import aot
 from lensopt.optics.intersect import NEWTON_ITERATIONS
 from lensopt.optics.lens import Lens
@@ -262,10 +262,7 @@ def _report_first(key: tuple, seconds: float) -> None:
     log[ident] = {"structure": desc, "seconds": round(seconds, 3), "when": time.strftime("%Y-%m-%dT%H:%M:%SZ",
                                                                                         time.gmtime())}
     try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".lensopt_compiles.", suffix=".part")
-        with os.fdopen(fd, "w") as f:
-            json.dump(log, f, indent=1)
-        os.replace(tmp, path)
+        write_text_atomic(path, json.dumps(log, indent=1))
     except OSError:
         return
     logger.info("compiled the trace for %s in %.1f s (cached on disk in %s)", desc, seconds, path.parent)

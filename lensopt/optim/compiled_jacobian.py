@@ -56,7 +56,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from lensopt.io.files import atomic_path, write_text_atomic
+from lensopt.files import atomic_path, write_text_atomic
 from lensopt.optics import aot
 from lensopt.optics.backend import current_backend
 

@@ -4,7 +4,7 @@ One step: a batch of scene patches and pseudo-random sensor tiles (``imaging.reg
 through the lens (``imaging.render``: per-tile 3×3 PSF grid, overlap-add, 0.5 % noise), the conditioned
 network restores them with the mean of each tile's sub-tile PSFs, Adam on the MAE with a cosine
 learning rate. Every random draw comes from three seeded ``torch.Generator``s (scenes, tiles, noise),
-so a checkpoint (``io.checkpoint``) holding their states, the weights and Adam's moments continues
+so a checkpoint (``lensopt.checkpoint``) holding their states, the weights and Adam's moments continues
 bit-identically.
 
 The loop stops cleanly at a step boundary when ``stop()`` returns true (the CLI sets it on Ctrl-C or
@@ -313,8 +313,8 @@ def train_network(
 
 
 def run_state(run: NetworkRun, prefix: str = "adam") -> tuple[dict[str, Tensor], dict[str, Tensor], dict[str, Any]]:
-    """(network weights, other tensors, JSON part) of ``run`` for ``io.checkpoint``."""
-    from lensopt.io.checkpoint import flatten_optimizer
+    """(network weights, other tensors, JSON part) of ``run`` for ``lensopt.checkpoint``."""
+    from lensopt.checkpoint import flatten_optimizer
 
     model = getattr(run.model, "module", run.model)  # unwrap DDP
     opt_t, opt_info = flatten_optimizer(prefix, run.optimizer.state_dict())
@@ -326,7 +326,7 @@ def run_state(run: NetworkRun, prefix: str = "adam") -> tuple[dict[str, Tensor],
 def load_run_state(run: NetworkRun, network: dict[str, Tensor], state: dict[str, Tensor], info: dict[str, Any],
                    step: int, prefix: str = "adam") -> None:
     """Put a checkpoint's weights, Adam moments, generator states and step into ``run``."""
-    from lensopt.io.checkpoint import CheckpointError, unflatten_optimizer
+    from lensopt.checkpoint import CheckpointError, unflatten_optimizer
 
     model = getattr(run.model, "module", run.model)
     device = next(model.parameters()).device

@@ -1,6 +1,6 @@
-"""A whole ``train-irm`` run: the network, its checkpoints (``io.checkpoint``), ``--resume``,
+"""A whole ``train-irm`` run: the network, its checkpoints (``lensopt.checkpoint``), ``--resume``,
 validation and optional TensorBoard logs around ``optim.irm.train_network``; and restoring a full
-image with a trained network (``lensopt restore``)."""
+image with a trained network (``lensopt restore``, and the ``--irm`` hook of evaluate and tolerance)."""
 
 from __future__ import annotations
 
@@ -14,8 +14,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
-from lensopt.errors import LensoptError
-from lensopt.io.checkpoint import (
+from lensopt.checkpoint import (
     Checkpoint,
     CheckpointError,
     fingerprint,
@@ -23,10 +22,12 @@ from lensopt.io.checkpoint import (
     load_checkpoint,
     save_checkpoint,
 )
+from lensopt.errors import LensoptError
 from lensopt.optim.irm import (
     ImagingSetup,
     NetworkRun,
     Source,
+    imaging_setup,
     lens_psfs,
     load_run_state,
     log_examples,
@@ -38,7 +39,8 @@ from lensopt.optim.irm import (
 from lensopt.restore.config import RestoreConfig, TrainConfig
 from lensopt.restore.model import ConditionedRestorer, mean_patch_psf
 
-__all__ = ["IrmResult", "network_fingerprint", "train_irm", "load_network", "restore_image", "tensorboard_layout"]
+__all__ = ["IrmResult", "network_fingerprint", "train_irm", "load_network", "load_restorer", "restoration_hook",
+           "restore_image", "tensorboard_layout"]
 
 log = logging.getLogger(__name__)
 
@@ -175,7 +177,7 @@ def train_irm(
 def load_network(path: Path, spec: Any, *, device: torch.device | str = "cpu",
                  option: str = "CKPT") -> tuple[ConditionedRestorer, Checkpoint]:
     """The network of a checkpoint, refused unless it was written for this lens structure."""
-    from lensopt.io.checkpoint import load_checkpoint as _load
+    from lensopt.checkpoint import load_checkpoint as _load
 
     probe = _load(path, option=option)
     net = RestoreConfig.from_dict(probe.meta.get("network_config", {}))
@@ -190,6 +192,34 @@ def load_network(path: Path, spec: Any, *, device: torch.device | str = "cpu",
         raise CheckpointError(f"weights do not fit the network: {str(err).splitlines()[0]}", path=option) from None
     model.eval()
     return model, probe
+
+
+def load_restorer(path: Path, model: Any, *, device: torch.device | str = "cpu",
+                  option: str = "CKPT") -> tuple[ConditionedRestorer, ImagingSetup, int]:
+    """The network of a checkpoint for ``model`` (a built lens spec: ``lensopt.spec.Model``), on ``device``,
+    with the imaging set-up it was trained with and its tile size (``restore_image``'s ``tile``)."""
+    net, ck = load_network(path, model.spec, device=device, option=option)
+    im = ck.meta.get("settings", {}).get("imaging", {})
+    setup = imaging_setup(model.camera(), patch=16, fields=int(im.get("fields", 9)),
+                          sampling=im.get("sampling", "rings:8"), psf_size=int(im.get("psf_size", 31)),
+                          grid=tuple(im.get("grid", (3, 3))))
+    return net, setup, int(im.get("patch", 256))
+
+
+def restoration_hook(model: Any, path: Path, *, option: str = "--irm") -> Callable[[Tensor, dict[str, Any]], Tensor]:
+    """The ``restore`` hook of ``imaging.evaluate`` (and of the tolerance ``psnr`` metric): the checkpoint's
+    network restores each capture (1, C, H, W) at its sensor region ``info["region"]`` (``--irm``)."""
+    device = model.lens.device
+    net, setup, tile = load_restorer(path, model, device=device, option=option)
+
+    def hook(capture: Tensor, info: dict[str, Any]) -> Tensor:
+        if capture.shape[1] != net.config.channels:
+            raise LensoptError(f"the network restores {net.config.channels}-channel images", path=option,
+                               got=f"{capture.shape[1]} channels")
+        out = restore_image(net, model.lens, model.system, setup, capture[0].to(device), info["region"], tile=tile)
+        return out[None].cpu()
+
+    return hook
 
 
 def restore_image(model: ConditionedRestorer, lens: Any, system: Any, setup: ImagingSetup, image: Tensor,

@@ -20,7 +20,7 @@ from lensopt.optim.image_objective import psnr_db
 from lensopt.optim.lm import LevenbergMarquardt, Trial
 from lensopt.optim.problem import Problem
 
-__all__ = ["Progress", "OptimizeResult", "OptimizeError", "Rebind", "run_problem", "make_optimizer", "resolve_device",
+__all__ = ["Progress", "OptimizeResult", "OptimizeError", "Rebind", "run_problem", "make_optimizer",
            "JACOBIANS"]
 
 JACOBIANS = ("eager", "compiled")
@@ -117,29 +117,6 @@ def make_optimizer(problem: Problem, theta: torch.Tensor, method: str,
     if method == "adam":
         return AdamOptimizer(theta, problem.residuals, problem.check, problem.opt.adam)
     raise LensoptError("must be lm or adam", path="--optimizer", got=method)
-
-
-def resolve_device(device: str | None) -> torch.device:
-    """``--device``: a torch device name (cpu, cuda, cuda:1, mps) or ``auto`` (CUDA when there is one,
-    else the CPU); an error when it is unusable here."""
-    if device is None:
-        return torch.device("cpu")
-    if device == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    try:
-        dev = torch.device(device)
-    except RuntimeError:
-        raise LensoptError("not a device name (cpu, cuda, cuda:N, mps)", path="--device", got=device) from None
-    if dev.type == "cuda" and not torch.cuda.is_available():
-        raise LensoptError("CUDA is not available on this machine (torch "
-                           f"{torch.__version__}); use --device cpu", path="--device", got=device)
-    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
-        raise LensoptError(f"this machine has {torch.cuda.device_count()} CUDA device(s)", path="--device", got=device)
-    if dev.type == "mps" and not torch.backends.mps.is_available():
-        raise LensoptError("MPS is not available on this machine; use --device cpu", path="--device", got=device)
-    if dev.type not in ("cpu", "cuda", "mps"):
-        raise LensoptError("expected cpu, cuda, cuda:N or mps", path="--device", got=device)
-    return dev
 
 
 _MALLOC_TUNED: list[bool] = []

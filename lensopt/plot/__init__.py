@@ -1,5 +1,18 @@
-"""Figures (matplotlib, Agg): each function takes analysis results and returns a ``Figure``; nothing
-here traces rays. ``save_figure`` writes a figure atomically, in the format its file name says."""
+"""Figures (matplotlib, Agg): each function takes analysis results and returns a ``Figure``; nothing here
+traces rays. ``save_figure`` writes a figure atomically, in the format its file name says.
+
+    style.py      colours, scale bars, ``save_figure``
+    layout.py     2D meridional layout
+    fans.py       ray fans
+    spots.py      spot diagrams
+    field.py      distortion and relative illumination against field
+    psf.py        RGB PSFs across the field
+    mtf.py        MTF against frequency
+    regions.py    sensor tiles and a sampled batch
+    tolerance.py  tolerancing: CDF, histogram, sensitivity
+    sweep.py      design sweeps
+    accuracy.py   accuracy against time
+"""
 
 from lensopt.plot.fans import plot_fans
 from lensopt.plot.layout import plot_layout

@@ -8,7 +8,7 @@ import numpy as np
 import torch
 
 from lensopt.analysis.psf_stack import PsfStack
-from lensopt.io.files import atomic_path
+from lensopt.files import atomic_path
 
 __all__ = ["psf_rgb", "save_psf_figure"]
 

@@ -12,7 +12,7 @@ import os
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from lensopt.io.files import atomic_path
+from lensopt.files import atomic_path
 
 __all__ = ["wavelength_color", "field_color", "nice_length", "add_scale_bar", "save_figure", "new_figure"]
 

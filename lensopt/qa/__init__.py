@@ -1,2 +1,5 @@
-"""Quality assurance over whole lenses: regression checks against a baseline (``check``) and what
-accuracy costs in time (``accuracy``). Sits beside ``optim``/``imaging`` and uses them."""
+"""Quality assurance over whole lenses. Sits beside ``optim``/``imaging`` and uses them.
+
+    check.py      regression checks against a baseline (``lensopt check``)
+    accuracy.py   what accuracy costs in time (``lensopt accuracy``)
+"""

@@ -25,7 +25,7 @@ from typing import Any
 from xml.etree import ElementTree as ET
 
 from lensopt.errors import LensoptError
-from lensopt.io.files import write_text_atomic
+from lensopt.files import write_text_atomic
 from lensopt.optics.backend import use_backend
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec.build import build

@@ -16,7 +16,7 @@ from typing import Any
 from pydantic import BaseModel, ValidationError
 
 from lensopt.errors import SpecError
-from lensopt.io.files import write_text_atomic
+from lensopt.files import write_text_atomic
 from lensopt.spec import models
 from lensopt.spec.models import LensSpec
 

@@ -29,7 +29,7 @@ __all__ = ["make_job", "lm_variables", "trial_spec"]
 
 def make_job(model: Model, settings: Any, tols: list[Tolerance] | None = None, *, restore: Any = None) -> Job:
     """The tolerance ``Job`` of a built spec and its ``ToleranceSpec`` settings; ``restore``: the
-    restoration hook of the ``psnr`` metric (``imaging.evaluate``'s, e.g. ``cli_restore.irm_hook``)."""
+    restoration hook of the ``psnr`` metric (``imaging.evaluate``'s, e.g. ``optim.irm_run.restoration_hook``)."""
     job = _make_job(model.lens, model.system, model.media, settings, lm_vars=lm_variables(model), tols=tols)
     if settings.metric != "psnr":
         if restore is not None:

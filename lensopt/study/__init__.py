@@ -1,5 +1,9 @@
-"""Studies over whole designs: sweeps of a spec over a grid of values with multi-start optimization
-(``lensopt sweep``). Above ``optim`` and ``spec`` (it edits specs and runs the optimizer); no UI."""
+"""Studies over whole designs (``lensopt sweep``). Above ``optim`` and ``spec`` (it edits specs and runs the
+optimizer); no UI.
+
+    keys.py    dotted keys into a spec, ``--vary``
+    sweep.py   a spec over a grid of values with multi-start optimization
+"""
 
 from lensopt.study.keys import Vary, get_key, parse_vary, set_key
 from lensopt.study.sweep import Settings, SweepEvent, SweepResult, expand_grid, perturbed_spec, run_sweep

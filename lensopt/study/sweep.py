@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from lensopt.errors import LensoptError
-from lensopt.io.files import json_safe, write_text_atomic
+from lensopt.files import json_safe, write_text_atomic
 from lensopt.parallel import run_tasks
 from lensopt.spec.io import dump_json, parse_spec
 from lensopt.spec.models import LensSpec

@@ -20,7 +20,7 @@ import torch
 from typer.testing import CliRunner
 
 from lensopt.analysis.spot import spot_stats
-from lensopt.cli import app
+from lensopt.cli.app import app
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import PupilSampling
 from lensopt.qa.accuracy import (

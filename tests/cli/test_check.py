@@ -17,7 +17,7 @@ from xml.etree import ElementTree as ET
 import pytest
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.cli.app import app
 
 ROOT = Path(__file__).resolve().parents[2]
 BASELINE = ROOT / "lenses" / "check_baseline.json"

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.cli.app import app
 
 ROOT = Path(__file__).resolve().parents[2]
 COOKE = ROOT / "specs" / "cooke_triplet_opt.toml"

@@ -11,7 +11,7 @@ import torch
 from typer.testing import CliRunner
 
 from lensopt.analysis.mtf import lens_mtf
-from lensopt.cli import app
+from lensopt.cli.app import app
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
 from lensopt.spec.tolerance_build import make_job

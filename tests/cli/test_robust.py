@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.cli.app import app
 from lensopt.spec import load_spec
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -313,7 +313,7 @@ def test_plan_json_has_no_float_noise(tmp_path: Path) -> None:
 
 
 def test_help_imports_no_torch() -> None:
-    code = ("import sys\nsys.argv = ['lensopt', '--help']\nfrom lensopt.cli import app\n"
+    code = ("import sys\nsys.argv = ['lensopt', '--help']\nfrom lensopt.cli.app import app\n"
             "try:\n    app()\nexcept SystemExit:\n    pass\n"
             "print(sorted(m for m in ('torch', 'numpy', 'pydantic', 'matplotlib', 'scipy') if m in sys.modules))")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV, timeout=60)
@@ -324,7 +324,7 @@ def test_help_imports_no_torch() -> None:
 
 
 def test_progress_is_plain_lines_when_not_a_terminal(tmp_path: Path) -> None:
-    from lensopt.cli_optimize import LiveProgress
+    from lensopt.cli.optimize import LiveProgress
     from lensopt.optim.run import Progress
 
     lines = []

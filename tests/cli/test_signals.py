@@ -46,22 +46,22 @@ def test_in_process_runs_get_no_process_handlers() -> None:
     Python's default SIGINT handler and the default SIGTERM, and an in-process command restores them."""
     from typer.testing import CliRunner
 
-    from lensopt import cli_process
-    from lensopt.cli import app
+    from lensopt.cli import signals
+    from lensopt.cli.app import app
 
-    assert not cli_process.is_cli_process()
-    assert cli_process.is_cli_process(["/venv/bin/lensopt", "trace"], ["/venv/bin/python", "/venv/bin/lensopt"])
-    assert cli_process.is_cli_process(["/x/lensopt/__main__.py"], ["python", "-m", "lensopt", "trace"])
-    assert not cli_process.is_cli_process(["pytest"], ["python", "-m", "pytest", "-k", "lensopt"])
+    assert not signals.is_cli_process()
+    assert signals.is_cli_process(["/venv/bin/lensopt", "trace"], ["/venv/bin/python", "/venv/bin/lensopt"])
+    assert signals.is_cli_process(["/x/lensopt/__main__.py"], ["python", "-m", "lensopt", "trace"])
+    assert not signals.is_cli_process(["pytest"], ["python", "-m", "pytest", "-k", "lensopt"])
     sigs = (signal.SIGINT, signal.SIGTERM, signal.SIGALRM)
     before = [signal.getsignal(s) for s in sigs], sys.unraisablehook
     r = CliRunner().invoke(app, ["--version"])
     assert r.exit_code == 0
     assert ([signal.getsignal(s) for s in sigs], sys.unraisablehook) == before
 
-    from lensopt.cli_common import _signal_handlers
+    from lensopt.cli.signals import command_signals
 
-    with _signal_handlers():  # in-process: SIGINT/SIGTERM only, no SIGALRM retry, the runner's unraisable hook
+    with command_signals():  # in-process: SIGINT/SIGTERM only, no SIGALRM retry, the runner's unraisable hook
         seen = [signal.getsignal(signal.SIGALRM), sys.unraisablehook]
     assert seen == [before[0][2], before[1]]
     assert signal.pthread_sigmask(signal.SIG_BLOCK, []) == set()  # no mask left behind (it leaks into children)
@@ -70,7 +70,7 @@ def test_in_process_runs_get_no_process_handlers() -> None:
 def test_signals_deferred_holds_and_replays_the_signal() -> None:
     """A signal inside ``signals_deferred`` (writing a result) waits for the end of the block; it is taken by
     swapping the Python handler, so it holds whichever thread the kernel delivered it to."""
-    from lensopt.cli_common import signals_deferred
+    from lensopt.cli.signals import signals_deferred
 
     got: list[int] = []
     prev = signal.signal(signal.SIGTERM, lambda s, f: got.append(s))
@@ -88,7 +88,7 @@ def test_signals_deferred_holds_and_replays_the_signal() -> None:
 def test_interrupted_is_not_plain_keyboard_interrupt() -> None:
     """CPython 3.11 flags an exception of type exactly KeyboardInterrupt leaving ``exec(string)`` as unhandled
     and ``python -m`` then kills itself with SIGINT at exit: the handlers raise subclasses."""
-    from lensopt.cli_process import Interrupted, Terminated
+    from lensopt.cli.signals import Interrupted, Terminated
 
     for cls in (Interrupted, Terminated):
         assert issubclass(cls, KeyboardInterrupt) and cls is not KeyboardInterrupt
@@ -106,10 +106,10 @@ def test_a_signal_inside_an_import_waits_for_its_end(tmp_path) -> None:  # noqa:
     script = textwrap.dedent(f"""
         import os, signal, sys, threading, time
         sys.path.insert(0, {str(tmp_path)!r})
-        from lensopt.cli_common import _signal_handlers, state
+        from lensopt.cli.signals import command_signals, state
         log = []
         try:
-            with _signal_handlers(retry=True):
+            with command_signals(retry=True):
                 threading.Timer(0.1, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
                 import slowmod
                 log.append("imported")
@@ -132,7 +132,7 @@ def test_a_signal_inside_a_finalizer_is_not_printed_and_dropped() -> None:
 
     script = textwrap.dedent("""
         import os, signal, sys, threading, time
-        from lensopt.cli_common import _signal_handlers
+        from lensopt.cli.signals import command_signals
         class Slow:
             def __del__(self):
                 t0 = time.monotonic()
@@ -140,7 +140,7 @@ def test_a_signal_inside_a_finalizer_is_not_printed_and_dropped() -> None:
                     pass
         log = []
         try:
-            with _signal_handlers(retry=True):
+            with command_signals(retry=True):
                 threading.Timer(0.1, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
                 obj = Slow()
                 del obj

@@ -12,7 +12,7 @@ from typing import Any
 
 import torch
 
-from lensopt.io.codev_export import write_codev
+from lensopt.interchange.codev.write import write_codev
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.paraxial import field_tangents, first_order, trace_paraxial
 from lensopt.optics.sampling import PupilSampling

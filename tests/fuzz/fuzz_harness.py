@@ -22,7 +22,7 @@ import typer.testing as typer_testing
 from hypothesis import HealthCheck, settings
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.cli.app import app
 
 _build = typer_testing._get_command
 

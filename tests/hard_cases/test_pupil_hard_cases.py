@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from lensopt.analysis.field import field_summary
 from lensopt.analysis.spot import spot_stats
-from lensopt.cli import app
+from lensopt.cli.app import app
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import PupilSampling
 from lensopt.optics.trace import Status

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.cli.app import app
 
 ROOT = Path(__file__).resolve().parents[2]
 COOKE = str(ROOT / "specs" / "cooke_triplet.toml")

@@ -12,7 +12,7 @@ import torch
 from imaging_lenses import oval_model
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.cli.app import app
 from lensopt.imaging.datasets import DeadLeaves
 from lensopt.imaging.evaluate import evaluate, scene_source
 from lensopt.imaging.io import ImageInfo, write_image

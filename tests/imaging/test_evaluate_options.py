@@ -9,7 +9,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.cli.app import app
 
 ROOT = Path(__file__).resolve().parents[2]
 CMOUNT = ROOT / "lenses" / "cmount_4p.json"

@@ -167,7 +167,7 @@ def test_run_plan_leaves_the_callers_image_alone() -> None:
 
 def test_simulate_command_imports_neither_scipy_nor_sympy(tmp_path: Path) -> None:
     # scipy.fft (0.3 s) and sympy (0.8 s, through torch.broadcast_shapes) were imported by every run.
-    code = ("import sys; from lensopt.cli import app; sys.argv[0] = 'lensopt'\n"
+    code = ("import sys; from lensopt.cli.app import app; sys.argv[0] = 'lensopt'\n"
             "try:\n    app()\nexcept SystemExit as e:\n    assert not e.code, e.code\n"
             "bad = sorted(m for m in ('scipy', 'sympy', 'skimage') if m in sys.modules)\n"
             "assert not bad, bad\n")

@@ -94,7 +94,7 @@ def test_plot_regions_figure_and_cli(tmp_path) -> None:
     from matplotlib.patches import Rectangle
     from typer.testing import CliRunner
 
-    from lensopt.cli import app
+    from lensopt.cli.app import app
     from lensopt.plot.regions import plot_regions
 
     g = tile_grid(Sensor(0.001, 8192, 6144), 256)

@@ -104,7 +104,7 @@ def test_simulate_cmount_without_rgb_weights(tmp_path: Path) -> None:
     # Before issue 10 this exited 2 ("spectrum.rgb_weights: needed to simulate an RGB image").
     from typer.testing import CliRunner
 
-    from lensopt.cli import app
+    from lensopt.cli.app import app
     from lensopt.imaging.io import ImageInfo, write_image
 
     lens = json.loads((ROOT / "lenses" / "cmount_4p.json").read_text())

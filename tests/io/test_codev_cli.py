@@ -7,7 +7,7 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.cli.app import app
 from lensopt.spec import load_spec
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 
 from lensopt.errors import SpecError
-from lensopt.io.codev_export import MIN_PRIVATE_WAVELENGTHS, export_codev, write_codev
-from lensopt.io.codev_names import codev_glass_name, find_codev_glass
-from lensopt.io.codev_syntax import split_commands
+from lensopt.interchange.codev.names import codev_glass_name, find_codev_glass
+from lensopt.interchange.codev.syntax import split_commands
+from lensopt.interchange.codev.write import MIN_PRIVATE_WAVELENGTHS, export_codev, write_codev
 from lensopt.materials import find_glass, list_glasses
 from lensopt.optics.paraxial import first_order
 from lensopt.spec import build, load_spec, parse_spec
@@ -77,7 +77,7 @@ def test_private_catalog_option_writes_every_glass_privately() -> None:
 
 
 def test_hco_is_the_phase_as_optical_path_at_the_construction_wavelength() -> None:
-    # φ = 2π/λ0 · OPD (CODE V DOE, see codev_export): d2 = −9.5 rad/mm² at λ0 = 587.5618 nm gives
+    # φ = 2π/λ0 · OPD (CODE V DOE, see interchange/codev/write.py): d2 = −9.5 rad/mm² at λ0 = 587.5618 nm gives
     # C1 = −9.5 · 587.5618e-6 / (2π) = −8.8837696599873e-4 mm⁻¹ (hand computed).
     text = export_codev(load_spec(DATA / "hybrid_diffractive.toml"))
     assert "  HCO C1 -0.00088837696599873" in text.splitlines()

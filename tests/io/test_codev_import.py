@@ -9,10 +9,10 @@ import pytest
 import torch
 
 from lensopt.errors import SpecError
-from lensopt.io.codev_export import export_codev
-from lensopt.io.codev_import import import_codev
-from lensopt.io.codev_names import fictitious_glass
-from lensopt.io.codev_syntax import split_commands
+from lensopt.interchange.codev.names import fictitious_glass
+from lensopt.interchange.codev.read import import_codev
+from lensopt.interchange.codev.syntax import split_commands
+from lensopt.interchange.codev.write import export_codev
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling

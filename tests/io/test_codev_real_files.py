@@ -12,7 +12,7 @@ import torch
 
 from lensopt.analysis.report import ray_report
 from lensopt.errors import SpecError
-from lensopt.io.codev_import import read_codev
+from lensopt.interchange.codev.read import read_codev
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.paraxial import first_order, trace_paraxial
 from lensopt.optics.sampling import PupilSampling

@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from lensopt.io.codev_export import export_codev
-from lensopt.io.codev_import import import_codev
+from lensopt.interchange.codev.read import import_codev
+from lensopt.interchange.codev.write import export_codev
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling

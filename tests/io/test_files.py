@@ -7,7 +7,7 @@ import stat
 
 import pytest
 
-from lensopt.io.files import atomic_path, write_text_atomic
+from lensopt.files import atomic_path, write_text_atomic
 
 
 def test_written_file_has_umask_permissions(tmp_path):

@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.cli.app import app
 from lensopt.errors import SpecError
-from lensopt.io.zemax_import import import_zemax, read_zemax
+from lensopt.interchange.zemax.read import import_zemax, read_zemax
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "zemax"
 LENS1 = (DATA / "optiland_lens1.zmx").read_text()

@@ -10,8 +10,8 @@ import math
 import pytest
 import torch
 
-from lensopt.io.zemax_export import export_zemax
-from lensopt.io.zemax_import import import_zemax
+from lensopt.interchange.zemax.read import import_zemax
+from lensopt.interchange.zemax.write import export_zemax
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.paraxial import first_order
 from lensopt.spec import build

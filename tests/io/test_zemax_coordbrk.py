@@ -15,7 +15,7 @@ import pytest
 import torch
 
 from lensopt.errors import SpecError
-from lensopt.io.zemax_import import import_zemax
+from lensopt.interchange.zemax.read import import_zemax
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec import build
@@ -109,7 +109,7 @@ def test_unsupported_coordinate_breaks_are_refused() -> None:
 
 
 def test_basic_decenters_export_as_coordinate_breaks_and_come_back() -> None:
-    from lensopt.io.zemax_export import export_zemax
+    from lensopt.interchange.zemax.write import export_zemax
 
     spec = import_zemax(_file()).spec
     text = export_zemax(spec)
@@ -123,7 +123,7 @@ def test_basic_decenters_export_as_coordinate_breaks_and_come_back() -> None:
 
 
 def test_lensopt_notes_stay_with_their_surfaces_after_a_break() -> None:
-    from lensopt.io.zemax_export import export_zemax
+    from lensopt.interchange.zemax.write import export_zemax
     from lensopt.spec import load_spec
 
     spec = load_spec(Path(__file__).resolve().parents[2] / "specs" / "cooke_triplet.toml")
@@ -142,7 +142,7 @@ def test_lensopt_notes_stay_with_their_surfaces_after_a_break() -> None:
 def test_decenter_and_return_round_trip(move: dict, tmp_path: Path) -> None:
     # Written as Zemax's break pair (order 0, then order flag 1 with negated values) and read back as one
     # decenter-and-return surface: the same lens, every ray within 1e-10 mm.
-    from lensopt.io.zemax_export import export_zemax
+    from lensopt.interchange.zemax.write import export_zemax
     from lensopt.spec import load_spec
 
     spec = load_spec(Path(__file__).resolve().parents[2] / "specs" / "cooke_triplet.toml")
@@ -178,7 +178,7 @@ def test_moved_element_round_trip(move: dict, tmp_path: Path) -> None:
     # A rigid element (cooke triplet's middle lens, surfaces 2..3) written as Zemax's element breaks
     # (break, the element with its last gap moved to a −L dummy, inverse break) and read back as the same
     # [[elements]] entry: same rays within 1e-10 mm; for a pure tilt or decenter also against optiland.
-    from lensopt.io.zemax_export import export_zemax
+    from lensopt.interchange.zemax.write import export_zemax
     from lensopt.spec import load_spec
     from lensopt.spec.models import ElementPlacementSpec
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import torch
 
-from lensopt.io.zemax_export import write_zemax
+from lensopt.interchange.zemax.write import write_zemax
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling

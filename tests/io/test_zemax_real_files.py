@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import torch
 
-from lensopt.io.zemax_import import read_zemax
+from lensopt.interchange.zemax.read import read_zemax
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling
@@ -164,7 +164,7 @@ def test_object_na_and_object_height_fields_match_optiland(tmp_path: Path, apert
     from optiland.fileio.zemax.reader.converter import ZemaxToOpticConverter
     from optiland.fileio.zemax.reader.parser import ZemaxDataParser
 
-    from lensopt.io.zemax_import import import_zemax
+    from lensopt.interchange.zemax.read import import_zemax
 
     text = _finite(aperture)
     model = build(import_zemax(text).spec)
@@ -190,7 +190,7 @@ def test_object_na_and_object_height_fields_match_optiland(tmp_path: Path, apert
 
 
 def test_paraxial_working_fnumber() -> None:
-    from lensopt.io.zemax_import import import_zemax
+    from lensopt.interchange.zemax.read import import_zemax
 
     model = build(import_zemax(_finite("FNUM 3.5 1")).spec)
     assert float(first_order(model.lens, model.system).working_fnumber) == pytest.approx(3.5, rel=1e-12)

@@ -10,8 +10,8 @@ import pytest
 import torch
 
 from lensopt.errors import SpecError
-from lensopt.io.zemax_export import export_zemax
-from lensopt.io.zemax_import import import_zemax
+from lensopt.interchange.zemax.read import import_zemax
+from lensopt.interchange.zemax.write import export_zemax
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec import LensSpec, build, load_spec

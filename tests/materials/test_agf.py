@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from lensopt.errors import MaterialError
-from lensopt.io.zemax_import import import_zemax
+from lensopt.interchange.zemax.read import import_zemax
 from lensopt.materials import find_glass, material_from_name
 from lensopt.materials.agf import AGF_FORMULAS, agf_glass, agf_index, read_agf
 from lensopt.spec import build, load_spec

@@ -15,7 +15,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.cli.app import app
 from lensopt.errors import LensoptError
 from lensopt.optics import aot, backend
 from lensopt.optics.backend import choose_backend, current_backend, on_compile, trace_with, use_backend

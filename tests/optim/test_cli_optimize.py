@@ -15,7 +15,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.cli.app import app
 from lensopt.design import build_problem, optimize
 from lensopt.materials import CatalogGlass
 from lensopt.spec import build, load_spec, parse_spec, save_json

@@ -9,7 +9,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.cli.app import app
 from lensopt.design import build_problem, optimize
 from lensopt.optim.lm import damped_step
 from lensopt.spec import parse_spec, save_json
@@ -80,7 +80,7 @@ def test_problem_on_the_cpu_device(make_cooke) -> None:  # noqa: ANN001
 
 
 def test_auto_device_is_cuda_when_there_is_one() -> None:
-    from lensopt.optim.run import resolve_device
+    from lensopt.devices import resolve_device
 
     assert resolve_device("auto").type == ("cuda" if torch.cuda.is_available() else "cpu")
     assert resolve_device(None).type == "cpu" and resolve_device("cpu").type == "cpu"

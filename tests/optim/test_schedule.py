@@ -66,7 +66,7 @@ def test_optimize_full_weight_starts_at_the_settled_merit_and_writes_the_schedul
 
     from typer.testing import CliRunner
 
-    from lensopt.cli import app
+    from lensopt.cli.app import app
     from lensopt.design import build_problem, optimize
     from lensopt.spec import load_spec, parse_spec, save_json
 
@@ -97,7 +97,7 @@ def test_full_weight_on_a_restored_spec_is_one_line_and_exit_2(tmp_path) -> None
 
     from typer.testing import CliRunner
 
-    from lensopt.cli import app
+    from lensopt.cli.app import app
 
     out = tmp_path / "lens.json"
     spec = Path(__file__).resolve().parents[2] / "specs" / "cmount_4p_restored.toml"

@@ -4,13 +4,13 @@ import sys
 
 import torch
 
-from lensopt.cli_restore import check_same_settings, init_distributed
 from lensopt.errors import LensoptError
+from lensopt.parallel import check_same_settings, init_distributed
 
-dist = init_distributed(torch.device("cpu"))
+rank, world, _ = init_distributed(torch.device("cpu"))
 try:
-    check_same_settings(dist, {"steps": 3 + dist.rank})
+    check_same_settings(world, {"steps": 3 + rank})
 except LensoptError as err:
-    print(f"rank {dist.rank}: error: {err}")
+    print(f"rank {rank}: error: {err}")
     sys.exit(2)
-print(f"rank {dist.rank}: no error")
+print(f"rank {rank}: no error")

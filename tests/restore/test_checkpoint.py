@@ -1,4 +1,4 @@
-"""Checkpoints (io.checkpoint) and train-irm runs: round trip, corruption and structure checks, atomic
+"""Checkpoints (lensopt.checkpoint) and train-irm runs: round trip, corruption and structure checks, atomic
 writes, and --resume continuing bit-identically to an uninterrupted run."""
 
 from __future__ import annotations
@@ -12,8 +12,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from lensopt.cli import app
-from lensopt.io.checkpoint import (
+from lensopt.checkpoint import (
     Checkpoint,
     CheckpointError,
     flatten_optimizer,
@@ -21,6 +20,7 @@ from lensopt.io.checkpoint import (
     save_checkpoint,
     unflatten_optimizer,
 )
+from lensopt.cli.app import app
 
 runner = CliRunner()
 
@@ -174,7 +174,7 @@ def test_restore_command(tiny_lens: Path, other_lens: Path, tmp_path: Path) -> N
 
 def _identity_checkpoint(lens: Path, out: Path) -> None:
     """A checkpoint holding a fresh (identity) network for ``lens``, written through the library."""
-    from lensopt.io.checkpoint import Checkpoint, save_checkpoint
+    from lensopt.checkpoint import Checkpoint, save_checkpoint
     from lensopt.optim.irm_run import network_fingerprint
     from lensopt.restore import ConditionedRestorer
     from lensopt.spec import dump_json, load_spec

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from lensopt.io.checkpoint import load_checkpoint
+from lensopt.checkpoint import load_checkpoint
 
 from .joint_spec import joint_data
 

@@ -12,10 +12,10 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.checkpoint import load_checkpoint
+from lensopt.cli.app import app
 from lensopt.design import build_problem
 from lensopt.design.joint_run import run_joint
-from lensopt.io.checkpoint import load_checkpoint
 from lensopt.optim import Problem
 from lensopt.optim.gtra import gtra_residual
 from lensopt.optim.joint import RestoredObjective

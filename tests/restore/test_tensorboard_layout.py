@@ -9,7 +9,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from tensorboard.plugins.custom_scalar import layout_pb2
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.cli.app import app
 from lensopt.spec import parse_spec
 from tests.restore.joint_spec import joint_data
 

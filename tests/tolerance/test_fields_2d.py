@@ -142,7 +142,7 @@ def test_fields_setting_is_checked_and_monte_carlo_runs() -> None:
 
 
 def test_cli_fields_option() -> None:
-    from lensopt.cli_tolerance import parse_fields
+    from lensopt.cli.tolerance import parse_fields
 
     assert parse_fields("xy") == "xy"
     assert parse_fields("0,1; 1,0;-0.5,0.5") == [(0.0, 1.0), (1.0, 0.0), (-0.5, 0.5)]
@@ -150,7 +150,7 @@ def test_cli_fields_option() -> None:
         parse_fields("0,1;1")
     from typer.testing import CliRunner
 
-    from lensopt.cli import app
+    from lensopt.cli.app import app
 
     runner = CliRunner()
     cooke = str(ROOT / "specs" / "cooke_triplet.toml")

@@ -17,7 +17,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from lensopt.cli import app
+from lensopt.cli.app import app
 from lensopt.errors import LensoptError
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec

@@ -1,0 +1,157 @@
+"""``lensopt check`` (regression checks of lenses against a baseline, for CI; library ``lensopt.qa.check``)
+and ``lensopt accuracy`` (what accuracy costs in time on one lens; library ``lensopt.qa.accuracy``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.table import Table
+
+from lensopt.cli.common import console, err_console, handle_errors, load_model, print_json
+from lensopt.errors import LensoptError
+
+__all__ = ["commands"]
+
+DEFAULT_BASELINE = Path("lenses/check_baseline.json")
+
+commands = typer.Typer()  # its commands, put in order by lensopt.cli.app
+
+
+@commands.command("check")
+@handle_errors
+def check(
+    lenses: Annotated[list[Path], typer.Argument(help="Lenses (.json or .toml) to check.")],
+    baseline: Annotated[Path, typer.Option("--baseline", help="Baseline JSON (lenses keyed by file name).")]
+    = DEFAULT_BASELINE,
+    update: Annotated[bool, typer.Option("--update", help="Rewrite these lenses' baseline entries "
+                                         "(atomically) instead of comparing.")] = False,
+    junit: Annotated[Path | None, typer.Option("--junit", help="Also write JUnit XML here (one test case "
+                                               "per lens and metric).")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of tables.")] = False,
+) -> None:
+    """Recompute each lens's metrics with the baseline's recorded settings and compare them with the
+    baseline: exit 0 when every metric is within its tolerance, 1 on a regression, 2 on bad input."""
+    from lensopt.files import write_text_atomic
+    from lensopt.qa import check as qc
+
+    # ``lensopt check lenses/*.json`` also matches the baseline itself when it lives there.
+    lenses = [p for p in lenses if p.resolve() != baseline.resolve()]
+    if update:
+        data = qc.update_baseline(lenses, baseline)
+        err_console.print(f"wrote {baseline} ({len(lenses)} lens(es) measured, {len(data['lenses'])} in all)",
+                          highlight=False)
+        return
+    results = qc.check_lenses(lenses, qc.load_baseline(baseline))
+    if junit is not None:
+        write_text_atomic(junit, qc.junit_xml(results))
+    if as_json:
+        print_json(qc.as_json(results))
+    else:
+        for r in results:
+            n_bad = sum(not m.passed for m in r.metrics)
+            if n_bad == 0:
+                console.print(f"[green]ok[/] {r.key}: {len(r.metrics)} metrics within tolerance")
+                continue
+            t = Table(title=f"{r.key} ({r.name}): {n_bad} of {len(r.metrics)} metrics moved",
+                      title_justify="left")
+            for col in ("metric", "baseline", "now", "Δ", "tolerance"):
+                t.add_column(col, justify="left" if col == "metric" else "right")
+            for m in r.metrics:
+                if m.passed:
+                    continue
+                t.add_row(m.metric, _fmt(m.baseline), _fmt(m.value),
+                          "" if m.delta is None else f"{m.delta:+.3g}", f"{m.tolerance:.3g}")
+            console.print(t)
+    if not all(r.passed for r in results):
+        raise typer.Exit(1)
+
+
+def _fmt(v: float | None) -> str:
+    return "—" if v is None else f"{v:.9g}"
+
+
+@commands.command("accuracy")
+@handle_errors
+def accuracy(
+    lens: Annotated[Path, typer.Argument(help="Lens spec (.toml) or resolved lens (.json).")],
+    target: Annotated[str, typer.Option("--target", help="Error target: 1% or 0.01 (relative for ESR/RMS, "
+                                        "NRMSE for PSFs, RMSE for images).")] = "1%",
+    budget: Annotated[float | None, typer.Option("--budget", help="Seconds: also say what this buys.")] = None,
+    knobs: Annotated[str | None, typer.Option("--knobs", help="Comma-separated knobs (default: all): rings, "
+                                              "rings_fixed, grid, float32, compiled, aim_steps, psf_rings, "
+                                              "psf_kernel, psf_bins, diffraction, sim_grid, sim_overlap.")]
+    = None,
+    repeats: Annotated[int, typer.Option("--repeats", min=1, max=20, help="Timing repeats (median).")] = 3,
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="Plot: error vs time (png, pdf, svg).")]
+    = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of tables.")] = False,
+) -> None:
+    """Error against a converged reference and wall time of every accuracy knob, measured on this lens;
+    the Pareto front and the cheapest settings that meet --target."""
+    from rich.progress import Progress
+
+    from lensopt.qa.accuracy import parse_knobs, parse_target, run_accuracy
+
+    tgt = parse_target(target)
+    names = parse_knobs(knobs)
+    if budget is not None and not budget > 0:
+        raise LensoptError("must be > 0 seconds", path="--budget", got=budget)
+    if output is not None and output.suffix.lower() not in (".png", ".pdf", ".svg"):
+        raise LensoptError("the plot is written as .png, .pdf or .svg", path="--output", got=str(output))
+    model = load_model(lens)
+    with Progress(console=err_console, transient=True, disable=as_json) as bar:
+        task = bar.add_task("measuring", total=1.0)
+        result = run_accuracy(model, knobs=names, repeats=repeats,
+                              progress=lambda f, s: bar.update(task, completed=f, description=s))
+    data = result.as_json(tgt, budget)
+    if output is not None:
+        from lensopt.plot.accuracy import accuracy_figure
+        from lensopt.plot.style import save_figure
+
+        save_figure(accuracy_figure(data, title=model.spec.name), output, dpi=150)
+    if as_json:
+        print_json(data)
+    else:
+        _render_accuracy(data)
+    if output is not None:
+        err_console.print(f"wrote {output}", highlight=False)
+
+
+def _render_accuracy(d: dict[str, Any]) -> None:
+    ref = d["reference"]["spot"]
+    console.print(f"[bold]{d['lens']}[/]: spot reference ESR {ref['esr_um']:.9f} µm by {ref['nodes']}, "
+                  f"last doubling changed it by {ref['agreement']:.1e} (relative)"
+                  + ("" if ref["converged"] else " [red](not converged to 1e-9)[/]"))
+    if "psf" in d["reference"]:
+        p = d["reference"]["psf"]
+        console.print(f"PSF reference: FFT diffraction PSF, {p['size']}×{p['size']} bins of {p['pitch_um']:g} µm, "
+                      f"{p['time_s']:.2f} s; with half the pupil samples it moves by NRMSE {p['self_check_nrmse']:.1e}")
+    if "sim" in d["reference"] and "skipped" in d["reference"]["sim"]:
+        console.print(f"simulation knobs skipped: {d['reference']['sim']['skipped']}", markup=False)
+    elif "sim" in d["reference"]:
+        s = d["reference"]["sim"]
+        console.print(f"simulation reference: {s['image']}, grid {s['grid']}, {s['fields']} fields, {s['sampling']}")
+    if d.get("compile_s") is not None:
+        console.print(f"compiled trace: first call (compilation) {d['compile_s']:.1f} s, excluded from the times")
+    t = Table(title="error vs time per knob (others at their defaults)", title_justify="left")
+    for col in ("knob", "setting", "ESR err", "RMS err", "aim err", "PSF NRMSE", "image RMSE", "time s", "note"):
+        t.add_column(col, justify="left" if col in ("knob", "setting", "note") else "right")
+    for p in d["points"]:
+        e = p["errors"]
+        cells = [f"{e[m]:.2e}" if m in e else "" for m in ("esr", "rms", "aim", "psf", "sim")]
+        t.add_row(p["knob"], p["setting"], *cells, f"{p['time_s']:.4f}", p["note"])
+    console.print(t)
+    for m, front in d["pareto"].items():
+        console.print(f"Pareto front ({m}): " + " → ".join(f"{p['setting']} ({p['errors'][m]:.1e}, {p['time_s']:.3g} s)"
+                                                           for p in front))
+    for m, r in d["recommendation"].items():
+        c = r["cheapest"]
+        line = (f"[bold]{m}[/] ≤ {r['target']:g}: " + (f"{c['setting']} ({c['errors'][m]:.2e} in {c['time_s']:.3g} s)"
+                                                      if c else r.get("why_not", "none")))
+        if "budget_buys" in r:
+            b = r["budget_buys"]
+            bought = f"{b['setting']} ({b['errors'][m]:.2e})" if b else "nothing measured"
+            line += f"; {d['budget_s']:g} s buys {bought}"
+        console.print(line)

@@ -1,0 +1,229 @@
+"""``lensopt train-irm`` and ``lensopt restore``, and ``optimize`` with ``objective = "restored"`` (CLI layer:
+parse, call the library, render).
+
+``train-irm`` trains the conditioned restoration network for a fixed lens (S4.3.2), checkpoints every
+N steps and when stopped by Ctrl-C or SIGTERM (at a step boundary), and ``--resume`` continues the
+checkpoint bit-identically. ``restore`` applies a trained network to a capture. ``optimize_restored``
+runs the joint lens + network optimization (``design.joint_run``), under torchrun too.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from lensopt.cli.common import LensArg, console, err_console, handle_errors, load_model
+from lensopt.cli.signals import stop_on_signals, stopped_at_step_boundary
+from lensopt.errors import LensoptError
+
+__all__ = ["commands", "optimize_restored", "parse_grid_text", "data_sources"]
+
+commands = typer.Typer()  # its commands, put in order by lensopt.cli.app
+
+
+@commands.command("train-irm")
+@handle_errors
+def train_irm_cmd(
+    lens: LensArg,
+    output: Annotated[Path, typer.Option("--output", "-o", help="Checkpoint folder to write.")],
+    images: Annotated[str, typer.Option("--images", help="Image folder (DIV2K layout or a hash split), or "
+                                        "'procedural' (dead-leaves scenes).")] = "procedural",
+    steps: Annotated[int | None, typer.Option("--steps", min=1, help="Steps (default: [restore.train]).")] = None,
+    batch: Annotated[int | None, typer.Option("--batch", min=1, help="Patches per step.")] = None,
+    patch: Annotated[int | None, typer.Option("--patch", min=16, help="Patch side, pixels.")] = None,
+    lr: Annotated[float | None, typer.Option("--lr", min=0.0, help="Adam learning rate.")] = None,
+    checkpoint_every: Annotated[int | None, typer.Option("--checkpoint-every", min=0)] = None,
+    validate_every: Annotated[int | None, typer.Option("--validate-every", min=0)] = None,
+    val_patches: Annotated[int | None, typer.Option("--val-patches", min=1)] = None,
+    fields: Annotated[int, typer.Option("--fields", min=1, max=64, help="Traced fields 0…1.")] = 9,
+    sampling: Annotated[str, typer.Option("--sampling", help="Pupil sampling of the PSFs.")] = "rings:8",
+    psf_size: Annotated[int, typer.Option("--psf-size", help="PSF side in pixels (odd).")] = 31,
+    grid: Annotated[str, typer.Option("--grid", help="Sub-tile PSF grid per patch.")] = "3x3",
+    resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at -o.")] = False,
+    log_dir: Annotated[Path | None, typer.Option("--log-dir", help="TensorBoard log folder.")] = None,
+    device: Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N | auto")] = "cpu",
+    seed: Annotated[int, typer.Option("--seed", help="Seed of every random draw.")] = 0,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON summary.")] = False,
+) -> None:
+    """Train the restoration network for a fixed lens (S4.3.2): Adam on MAE, cosine schedule."""
+    import dataclasses
+
+    import torch
+
+    from lensopt.devices import resolve_device
+    from lensopt.optim.irm import imaging_setup
+    from lensopt.optim.irm_run import train_irm
+    from lensopt.optim.joint import Dist
+    from lensopt.parallel import check_same_settings, init_distributed
+    from lensopt.spec import dump_json
+    from lensopt.spec.restore import configs_from_spec
+
+    dev = resolve_device(device)
+    model = load_model(lens)
+    net, cfg = configs_from_spec(model.spec.restore)
+    over = {k: v for k, v in dict(batch=batch, patch=patch, lr=lr, checkpoint_every=checkpoint_every,
+                                  validate_every=validate_every, validation_patches=val_patches).items()
+            if v is not None}
+    cfg = dataclasses.replace(cfg, seed=seed, **over)
+    setup = imaging_setup(model.camera(), patch=cfg.patch, fields=fields, sampling=sampling, psf_size=psf_size,
+                          grid=parse_grid_text(grid, "--grid"), noise_sigma=cfg.noise_sigma, device=None)
+    net = dataclasses.replace(net, channels=setup.channels)
+    source, val_source, data = data_sources(images, cfg.patch, seed)
+    n_steps = steps or cfg.steps
+
+    def show(rec: dict[str, Any]) -> None:
+        if as_json:
+            return
+        line = f"step {rec['step']}/{n_steps}  MAE {rec['loss']:.5f}  lr {rec['lr']:.2e}  {rec['wall_s']:.2f} s"
+        if "psnr_restored" in rec:
+            line += f"  | held-out PSNR raw {rec['psnr_raw']:.2f} dB → restored {rec['psnr_restored']:.2f} dB"
+        err_console.print(line, highlight=False)
+
+    dist = Dist(*init_distributed(dev))
+    if dev.type == "cuda" and dist.active:
+        dev = torch.device(dist.device)
+        torch.cuda.set_device(dev)
+    try:
+        check_same_settings(dist.world, {"spec": model.spec.model_dump(mode="json"), "cfg": repr(cfg),
+                                         "steps": n_steps, "data": data, "resume": resume, "output": str(output)})
+        with stop_on_signals() as flag:
+            res = train_irm(model.spec, dump_json(model.spec), (model.lens, model.system), setup, net, cfg,
+                            source, val_source, steps=n_steps, data=data, output=output, resume=resume,
+                            device=dev, log_dir=log_dir, stop=lambda: dist.any(flag[0]),
+                            on_progress=show if dist.rank == 0 else None, dist=dist)
+    finally:
+        if dist.active:
+            import torch.distributed as tdist
+
+            tdist.destroy_process_group()
+    if dist.rank != 0:
+        if res.interrupted:
+            raise typer.Exit(stopped_at_step_boundary())
+        return
+    summary = {"checkpoint": res.checkpoint, "steps": res.steps, "interrupted": res.interrupted,
+               "validation": res.validation, "device": str(dev), "processes": dist.world}
+    if as_json:
+        console.print_json(json.dumps(summary))
+    else:
+        msg = f"wrote {res.checkpoint} (step {res.steps}{', interrupted' if res.interrupted else ''})"
+        console.print(msg, highlight=False)
+    if res.interrupted:
+        raise typer.Exit(stopped_at_step_boundary())
+
+
+@commands.command("restore")
+@handle_errors
+def restore_cmd(
+    lens: LensArg,
+    checkpoint: Annotated[Path, typer.Argument(help="Checkpoint folder (train-irm or joint optimize).")],
+    image: Annotated[Path, typer.Argument(help="Capture to restore.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Restored image to write.")],
+    region: Annotated[str | None, typer.Option("--region", help="Where the capture lies on the sensor.")] = None,
+    device: Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N | auto")] = "cpu",
+) -> None:
+    """Restore a capture of LENS with the network of CHECKPOINT."""
+    import numpy as np
+    import torch
+
+    from lensopt.devices import resolve_device
+    from lensopt.imaging.io import read_image, write_image
+    from lensopt.imaging.scene import parse_region
+    from lensopt.optim.irm_run import load_restorer, restore_image
+
+    dev = resolve_device(device)
+    model = load_model(lens)
+    net, setup, tile = load_restorer(checkpoint, model, device=dev, option="CHECKPOINT")
+    arr, info = read_image(image)
+    if arr.shape[-1] != net.config.channels:
+        raise LensoptError(f"the network restores {net.config.channels}-channel images", path="IMAGE",
+                           got=f"{arr.shape[-1]} channels")
+    reg = parse_region(region, setup.sensor, info.width, info.height)
+    x = torch.from_numpy(arr).permute(2, 0, 1).to(dev)
+    y = restore_image(net, model.lens, model.system, setup, x, reg, tile=tile)
+    desc = write_image(output, np.ascontiguousarray(y.clamp(0, 1).permute(1, 2, 0).cpu().numpy()), info)
+    console.print(f"wrote {output} ({desc})", highlight=False)
+
+
+def parse_grid_text(text: str, option: str) -> tuple[int, int]:
+    try:
+        a, b = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise LensoptError("must be WxH, e.g. 3x3", path=option, got=text) from None
+    if a < 1 or b < 1:
+        raise LensoptError("must be WxH with positive numbers", path=option, got=text)
+    return a, b
+
+
+def data_sources(images: str, patch: int, seed: int) -> tuple[Any, Any, str]:
+    """(training source, held-out source, description) for ``--images DIR|procedural``."""
+    from lensopt.imaging.datasets import DeadLeaves, ImageFolder
+
+    if images == "procedural":
+        return DeadLeaves(seed=seed), DeadLeaves(seed=seed + 1_000_003), "procedural"
+    train = ImageFolder(images, split="train", patch=patch, option="--images")
+    val = ImageFolder(images, split="val", patch=patch, option="--images")
+    return train, val, str(Path(images).resolve())
+
+
+def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed: int, checkpoint: Path | None,
+                      resume: bool, device: str, log_dir: Path | None, quiet: bool, as_json: bool) -> None:
+    """``lensopt optimize`` with ``objective = "restored"``: the joint run, then the lens (and, with
+    --checkpoint, the network) written; rank 0 only writes and prints under torchrun."""
+    from lensopt.design.joint_run import run_joint
+    from lensopt.devices import resolve_device
+    from lensopt.optim.joint import Dist
+    from lensopt.parallel import check_same_settings, init_distributed
+    from lensopt.spec import save_json
+
+    if output.suffix.lower() != ".json":
+        raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
+    dev = resolve_device(device)
+    dist = Dist(*init_distributed(dev))
+    if dev.type == "cuda" and dist.active:
+        import torch
+
+        dev = torch.device("cuda", dist.rank % torch.cuda.device_count())
+        torch.cuda.set_device(dev)
+    try:
+        check_same_settings(dist.world, {"spec": start_spec.model_dump(mode="json"), "steps": steps, "seed": seed,
+                                         "checkpoint": str(checkpoint), "resume": resume})
+        loud = dist.rank == 0 and not quiet and not as_json
+
+        def show(rec: dict[str, Any]) -> None:
+            if not loud:
+                return
+            line = (f"step {rec['step']}  batch PSNR after restoration {rec['psnr_batch_db']:.2f} dB  "
+                    f"MAE {rec['mae']:.4f}  λ {rec['damping']:.2e}  ESR {rec['esr_um']:.2f} µm  {rec['wall_s']:.2f} s")
+            if "psnr_restored" in rec:
+                line += f"  | held-out {rec['psnr_raw']:.2f} → {rec['psnr_restored']:.2f} dB"
+            err_console.print(line, highlight=False)
+
+        with stop_on_signals() as flag:
+            res = run_joint(start_spec, steps=steps, seed=seed, checkpoint=checkpoint, resume=resume, device=dev,
+                            log_dir=log_dir, dist=dist, stop=lambda: dist.any(flag[0]), on_progress=show)
+        if dist.rank == 0:
+            save_json(res.spec, output)
+            summary = {"output": str(output), "checkpoint": str(checkpoint) if checkpoint else None,
+                       "steps": res.steps, "interrupted": res.interrupted, "start": res.start, "final": res.final,
+                       "elapsed_s": res.elapsed_s, "notes": res.notes, "processes": dist.world,
+                       "device": str(dev)}
+            if as_json:
+                console.print_json(json.dumps(summary))
+            else:
+                for n in res.notes:
+                    err_console.print(f"note: {n}", highlight=False)
+                if res.start and res.final:
+                    console.print(f"held-out PSNR raw {res.start['psnr_raw']:.2f} → {res.final['psnr_raw']:.2f} dB, "
+                                  f"restored {res.start['psnr_restored']:.2f} → {res.final['psnr_restored']:.2f} dB",
+                                  highlight=False)
+                console.print(f"wrote {output}" + (f" and {checkpoint}" if checkpoint else ""), highlight=False)
+    finally:
+        if dist.active:
+            import torch.distributed as tdist
+
+            tdist.destroy_process_group()
+    if res.interrupted:
+        raise typer.Exit(stopped_at_step_boundary())

@@ -1,1 +1,0 @@
-"""File input/output: atomic writes, CODE V sequence files."""
