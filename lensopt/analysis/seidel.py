@@ -69,14 +69,14 @@ class SeidelSums:
         """Wavefront coefficients (``WAVE_NAMES``) in waves of the reference wavelength: (7,) for
         ``total``, (7, S) for ``surfaces``."""
         s = self.total if which == "total" else self.surfaces
-        f = torch.tensor(_WAVE_FACTORS, dtype=s.dtype, device=s.device)
-        return (s.T * f).T / (self.wavelength_um * 1e-3)
+        f = torch.tensor(_WAVE_FACTORS, dtype=s.dtype, device=s.device).reshape(-1, *[1] * (s.dim() - 1))
+        return s * f / (self.wavelength_um * 1e-3)
 
     def transverse(self, which: str = "total") -> Tensor:
         """Transverse ray aberrations (TSC, CC, TAC, TPC, DC, TAchC, TchC), mm."""
         s = self.total if which == "total" else self.surfaces
-        f = torch.tensor([2, 2, 2, 2, 2, 1, 1], dtype=s.dtype, device=s.device)
-        return (s.T / f).T / self.image_nu
+        f = torch.tensor([2, 2, 2, 2, 2, 1, 1], dtype=s.dtype, device=s.device).reshape(-1, *[1] * (s.dim() - 1))
+        return s / f / self.image_nu
 
     def as_dict(self) -> dict[str, object]:
         """Plain data (what ``lensopt trace --seidel --json`` prints)."""

@@ -5,8 +5,10 @@ m < 0, with θ measured from the +x axis of the pupil (px) towards +y (py), ρ =
 Three orderings, numbered as their users number them:
 
 - ``fringe``: the University of Arizona "Fringe" set (Zemax "Zernike Fringe", CODE V "ZFR"), terms
-  1, 2, …: j = (1 + (n + |m|)/2)² − 2|m| + (1 − sign m)/2; **not normalized** (N = 1), so Z4 = 2ρ² − 1
-  and a coefficient is the term's amplitude at the pupil edge. The standard set has 37 terms.
+  1 … 37: j = (1 + (n + |m|)/2)² − 2|m| + (1 − sign m)/2 for j ≤ 36, and Z37 = 12th-order spherical
+  (n = 12, m = 0), the set's one exception to the pattern (which would put (6, 6) there; optiland 0.6.3
+  follows the pattern); **not normalized** (N = 1), so Z4 = 2ρ² − 1 and a coefficient is the term's
+  amplitude at the pupil edge. At most 37 terms.
 - ``noll``: Noll's ordering (J. Opt. Soc. Am. 66, 207 (1976); Zemax "Zernike Standard"), terms 1, 2, …,
   even j the cosine term, odd j the sine term; **RMS-normalized**, N = sqrt(2(n + 1)) (m ≠ 0) or
   sqrt(n + 1) (m = 0), so a coefficient is the term's RMS over the pupil.
@@ -56,6 +58,8 @@ def zernike_indices(ordering: str, terms: int) -> tuple[tuple[int, int], ...]:
         raise LensoptError(f"must be one of {', '.join(ORDERINGS)}", path="zernike.ordering", got=ordering)
     if terms < 1:
         raise LensoptError("must be ≥ 1", path="zernike.terms", got=terms)
+    if ordering == "fringe" and terms > 37:
+        raise LensoptError("the Fringe set has 37 terms (use noll or ansi for more)", path="zernike.terms", got=terms)
     found: dict[int, tuple[int, int]] = {}
     first = first_index(ordering)
     n = 0
@@ -65,6 +69,8 @@ def zernike_indices(ordering: str, terms: int) -> tuple[tuple[int, int], ...]:
         n += 1
         if n > 200:  # pragma: no cover - the numbering functions are bijections
             raise RuntimeError("Zernike numbering did not close")
+    if ordering == "fringe":
+        found[37] = (12, 0)
     return tuple(found[j] for j in range(first, first + terms))
 
 
