@@ -30,6 +30,7 @@ from torch import Tensor
 
 from lensopt.analysis.psf_reference import debye_intensity, wavefront_error
 from lensopt.analysis.spot import spot_stats
+from lensopt.errors import LensoptError
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import first_order
@@ -94,7 +95,7 @@ def geometric_energy(lens: Lens, system: System, *, rel_field: Tensor, radii: Te
                      ) -> EnergyCurves:
     """Geometric encircled/ensquared energy from the rays of ``sampling`` (see the module docstring), or
     of the full-pupil points ``pupil`` ((P, 2)) when given; ``radii`` default: 101 radii up to 1.1 × the
-    largest ray distance."""
+    largest ray distance (201 radii)."""
     if pupil is None:
         scheme = PupilSampling.parse(sampling, path="encircled.sampling")
         pupil, half = scheme.points(dtype=lens.dtype, device=lens.device), scheme.half
@@ -108,7 +109,7 @@ def geometric_energy(lens: Lens, system: System, *, rel_field: Tensor, radii: Te
     s = d.abs().amax(-1)
     if radii is None:
         top = float(torch.where(valid, r, torch.zeros_like(r)).max())
-        radii = torch.linspace(0.0, 1.1 * max(top, 1e-9), 101, dtype=lens.dtype, device=lens.device)
+        radii = torch.linspace(0.0, 1.1 * max(top, 1e-9), 201, dtype=lens.dtype, device=lens.device)
     radii = radii.to(lens.dtype)
     m = valid.to(lens.dtype)
     count = m.sum(-1).clamp_min(1.0)  # (F, W)
@@ -141,14 +142,15 @@ def pupil_cell_area(alpha: Tensor, beta: Tensor, amp: Tensor, n: int) -> Tensor:
 
 @torch.no_grad()
 def diffraction_energy(lens: Lens, system: System, *, rel_field: Tensor, radii: Tensor | None = None,
-                       pupil_samples: int = 64, pitch_mm: float | None = None, center: str = "centroid",
+                       pupil_samples: int | None = None, pitch_mm: float | None = None, center: str = "centroid",
                        sampling: str = "rings:16") -> EnergyCurves:
     """Diffraction encircled/ensquared energy (see the module docstring).
 
     Args:
-        radii: (R,) radii; default 101 radii up to the geometric extent plus 6 Airy radii.
-        pupil_samples: pupil grid N (N×N rays; the PSF is periodic with period λ/Δα, Δα = 2 NA/N, so the
-            largest radius must stay below half of it — ``radii`` are checked).
+        radii: (R,) radii; default 201 radii up to the geometric extent plus 6 Airy radii.
+        pupil_samples: pupil grid N (N×N rays). The PSF of a sampled pupil repeats with period λ/Δα,
+            Δα = 2 NA/N, so the largest radius must stay below half of it; default: enough for ``radii``
+            (at least 64, at most 512).
         pitch_mm: grid pitch; default the Airy radius / 12.
         sampling: rays of the geometric spot that sets the centroid and the default extent.
     """
@@ -158,14 +160,16 @@ def diffraction_energy(lens: Lens, system: System, *, rel_field: Tensor, radii: 
     geo = geometric_energy(lens, system, rel_field=rel_field, sampling=sampling, center=center)
     if radii is None:
         extent = float(geo.radius_mm[-1]) / 1.1
-        radii = torch.linspace(0.0, extent + 6.0 * airy, 101, dtype=lens.dtype, device=lens.device)
+        radii = torch.linspace(0.0, extent + 6.0 * airy, 201, dtype=lens.dtype, device=lens.device)
     radii = radii.to(lens.dtype)
-    n = pupil_samples
-    period = float(lens.wavelength_um.min()) * 1e-3 * wn * n / float(lens.index[-1].max())  # λ/Δα, Δα = 2 NA/N
     r_max = float(radii.max())
-    if not r_max < 0.5 * period:
-        raise ValueError(f"radius {r_max:.4g} mm needs more pupil samples: the PSF repeats every "
-                         f"{period:.4g} mm with {n} samples")
+    lam_min, n_img = float(lens.wavelength_um.min()) * 1e-3, float(lens.index[-1].max())
+    need = math.ceil(2.2 * r_max * n_img / (lam_min * wn))  # the PSF repeats every λ/Δα, Δα = 2 NA/N
+    n = pupil_samples if pupil_samples is not None else min(max(64, need), 512)
+    if n < need:
+        raise LensoptError(f"too few for radii up to {1e3 * r_max:.4g} µm: the PSF repeats every "
+                           f"{1e3 * lam_min * wn * n / n_img:.4g} µm; use at least {need}",
+                           path="pupil_samples", got=n)
     pitch = pitch_mm or airy / 12.0
     half = math.ceil(r_max / pitch) + 1
     coord = torch.arange(-half, half + 1, dtype=torch.float64, device=lens.device) * pitch

@@ -25,6 +25,7 @@ from lensopt.analysis.encircled import diffraction_energy, geometric_energy
 from lensopt.analysis.mtf_field import defocused
 from lensopt.analysis.strehl import marechal, strehl
 from lensopt.analysis.wavefront import opd_fans
+from lensopt.errors import LensoptError
 from lensopt.optics.paraxial import first_order
 from lensopt.spec import build, load_spec, parse_spec
 
@@ -84,7 +85,7 @@ def test_diffraction_encircled_energy_of_a_perfect_lens_is_airy() -> None:
 
 def test_diffraction_energy_needs_enough_pupil_samples() -> None:
     model = build_oval(epd=10.0)
-    with pytest.raises(ValueError, match="needs more pupil samples"):
+    with pytest.raises(LensoptError, match=r"^pupil_samples: too few for radii up to 1000 µm"):
         diffraction_energy(model.lens, model.system, rel_field=AXIS,
                            radii=torch.tensor([0.0, 1.0], dtype=torch.float64), pupil_samples=16)
 
