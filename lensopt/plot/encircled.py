@@ -25,8 +25,9 @@ def encircled_figure(curves: EnergyCurves, *, ensquared: bool = False, title: st
         fig = new_figure(6.0, 4.4)
         ax = fig.add_subplot()
         if curves.airy_radius_mm > 0 and not ensquared:
-            v = 3.8317 * r_um / (1e3 * curves.airy_radius_mm)  # first zero of J1 at the Airy radius
-            ax.plot(r_um, 1 - j0(v) ** 2 - j1(v) ** 2, color="0.45", lw=0.9, ls=":",
+            dense = np.linspace(0.0, float(r_um.max()), 1001)
+            v = 3.8317 * dense / (1e3 * curves.airy_radius_mm)  # first zero of J1 at the Airy radius
+            ax.plot(dense, 1 - j0(v) ** 2 - j1(v) ** 2, color="0.45", lw=0.9, ls=":",
                     label="diffraction limit (reference λ)")
         order = np.argsort(curves.rel_field.cpu().numpy(), kind="stable")
         for i, f in enumerate(order):

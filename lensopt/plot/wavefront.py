@@ -8,6 +8,7 @@ import matplotlib
 import numpy as np
 from matplotlib.figure import Figure
 
+from lensopt.analysis.strehl import StrehlResult
 from lensopt.analysis.wavefront import WavefrontMap, WavefrontStats
 from lensopt.analysis.zernike import ZernikeFit
 from lensopt.plot.fans import _round_up
@@ -23,13 +24,13 @@ _NAMES = {(0, 0): "piston", (1, 1): "tilt x", (1, -1): "tilt y", (2, 0): "defocu
 
 
 def wavefront_figure(wm: WavefrontMap, wavelength: int, *, stats: WavefrontStats | None = None,
-                     strehl: np.ndarray | None = None, zernike: ZernikeFit | None = None, title: str = "",
+                     strehl: StrehlResult | None = None, zernike: ZernikeFit | None = None, title: str = "",
                      subtitle: str = "", top_terms: int = 6) -> Figure:
     """Maps of ``wm`` at wavelength index ``wavelength``.
 
     Args:
         stats: RMS and P-V per field and wavelength (printed under the maps).
-        strehl: (F, W) Strehl ratios (printed too).
+        strehl: Strehl ratios from the PSF and Maréchal's estimate (both printed).
         zernike: a fit of ``wm.wavefront`` with coefficients (F, W, J): the ``top_terms`` largest
             (piston and tilt excluded) are listed under each map.
     """
@@ -43,8 +44,10 @@ def wavefront_figure(wm: WavefrontMap, wavelength: int, *, stats: WavefrontStats
     lam_nm = 1e3 * float(wf.wavelength_um[wavelength])
     order = np.argsort(wf.rel_field.cpu().numpy(), kind="stable")
     with matplotlib.rc_context(RC):
-        fig = new_figure(2.0 + 2.6 * num_f, 4.6 if zernike is not None else 3.6)
-        axes = fig.subplots(1, num_f, squeeze=False)[0]
+        rows = 3 + (zernike is not None) * top_terms
+        fig = new_figure(1.2 + 3.3 * num_f, 3.6 + 0.14 * rows)
+        grid = fig.subplots(2, num_f, squeeze=False, height_ratios=[3.0, 0.16 * rows + 0.1])
+        axes, notes = grid[0], grid[1]
         image = None
         for col, f in enumerate(order):
             ax = axes[col]
@@ -64,7 +67,8 @@ def wavefront_figure(wm: WavefrontMap, wavelength: int, *, stats: WavefrontStats
                 lines.append(f"RMS {rms:.3f} λ   P-V {pv:.3f} λ")
                 lines.append(f"(to chief: RMS {float(stats.rms_chief[f, wavelength]):.3f} λ)")
             if strehl is not None:
-                lines.append(f"Strehl {float(strehl[f, wavelength]):.3f}")
+                lines.append(f"Strehl {float(strehl.psf[f, wavelength]):.3f} (PSF), "
+                             f"{float(strehl.marechal[f, wavelength]):.3f} (Maréchal)")
             if zernike is not None:
                 c = zernike.coefficients[f, wavelength].detach().cpu().numpy()
                 keep = [j for j, nm in enumerate(zernike.indices) if nm[0] > 1]
@@ -73,8 +77,9 @@ def wavefront_figure(wm: WavefrontMap, wavelength: int, *, stats: WavefrontStats
                 lines.append(f"{zernike.ordering} Zernike (waves):")
                 lines += [f"Z{j + first} {_NAMES.get(zernike.indices[j], str(zernike.indices[j]))}: {c[j]:+.3f}"
                           for j in top]
-            ax.text(0.0, -0.2, "\n".join(lines), transform=ax.transAxes, va="top", ha="left", fontsize=7.5,
-                    family="monospace")
+            notes[col].axis("off")
+            notes[col].text(0.0, 1.0, "\n".join(lines), transform=notes[col].transAxes, va="top", ha="left",
+                            fontsize=7.5, family="monospace")
         if image is not None:
             fig.colorbar(image, ax=list(axes), shrink=0.8, label="W (waves)")
         note = (f"{lam_nm:g} nm · W = OPL(chief) − OPL(ray) to the chief ray's reference sphere (ahead-positive) · "

@@ -89,7 +89,7 @@ def test_energy_mtf_and_through_focus_figures(cooke) -> None:
                          sampling="rings:16")
     fig = encircled_figure(e)
     curves = [y for y in _lines(fig.axes[0]) if y.size == e.radius_mm.shape[0]]
-    np.testing.assert_array_equal(curves[1], e.encircled[0].numpy())  # after the diffraction limit
+    np.testing.assert_array_equal(curves[0], e.encircled[0].numpy())  # the diffraction limit is sampled finer
     m = mtf_vs_field(cooke.lens, cooke.system, [10.0, 30.0], fields=5, sampling="rings:16")
     fig = mtf_field_figure(m)
     np.testing.assert_array_equal(_lines(fig.axes[0])[0], m.tangential[:, 0].numpy())
