@@ -17,7 +17,7 @@ from torch import Tensor
 from lensopt.errors import LensoptError
 from lensopt.optics.lens import Lens, System
 
-__all__ = ["relative_fields", "wavelength_indices", "frequencies", "positive_int"]
+__all__ = ["relative_fields", "fields_of", "wavelength_indices", "frequencies", "positive_int"]
 
 _FIELD_SLACK = 1e-9
 
@@ -36,6 +36,11 @@ def relative_fields(system: System, values: Sequence[float] | Tensor | None, *, 
             raise LensoptError(f"relative field must lie in [0, 1] (1 = the full field, {system.field_max:g}{unit})",
                                path=path, got=v)
     return torch.tensor(vals, dtype=dtype, device=device)
+
+
+def fields_of(lens: Lens, system: System, rel_field: Tensor | Sequence[float] | None, *, path: str = "field") -> Tensor:
+    """``relative_fields`` on the lens's dtype and device (the analyses' entry check)."""
+    return relative_fields(system, rel_field, path=path, dtype=lens.dtype, device=lens.device)
 
 
 def wavelength_indices(lens: Lens, values_nm: Sequence[float] | None, *, path: str = "wavelength") -> list[int]:

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from lensopt.analysis.checks import fields_of
 from lensopt.analysis.psf_reference import debye_intensity, wavefront_error
 from lensopt.analysis.spot import spot_stats
 from lensopt.errors import LensoptError
@@ -101,6 +102,7 @@ def geometric_energy(lens: Lens, system: System, *, rel_field: Tensor, radii: Te
         pupil, half = scheme.points(dtype=lens.dtype, device=lens.device), scheme.half
     else:
         half = False
+    rel_field = fields_of(lens, system, rel_field)
     b = trace_bundle(lens, system, pupil.to(lens.dtype), half_pupil=half, rel_field=rel_field)
     c = _centers(lens, system, rel_field, center, spot_stats(b, system.wavelength_weights).centroid)
     xy, valid = b.result.pos[..., :2], b.result.valid
@@ -157,6 +159,7 @@ def diffraction_energy(lens: Lens, system: System, *, rel_field: Tensor, radii: 
     fo = first_order(lens, system)
     wn = abs(float(fo.working_fnumber))
     airy = _airy(lens, system)
+    rel_field = fields_of(lens, system, rel_field)
     geo = geometric_energy(lens, system, rel_field=rel_field, sampling=sampling, center=center)
     if radii is None:
         extent = float(geo.radius_mm[-1]) / 1.1

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from lensopt.analysis.checks import fields_of
 from lensopt.materials import Material
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.lens import Lens, System
@@ -85,7 +86,7 @@ def field_curves(lens: Lens, system: System, rel_field: Tensor, *, delta: float 
     dt, dev = lens.dtype, lens.device
     pupil = torch.tensor([[0.0, 0.0], [0.0, -delta], [0.0, delta], [-delta, 0.0], [delta, 0.0]], dtype=dt, device=dev)
     fo = first_order(lens, system)
-    b = trace_bundle(lens, system, pupil, rel_field=rel_field.to(dt), aim=aim, fo=fo)
+    b = trace_bundle(lens, system, pupil, rel_field=fields_of(lens, system, rel_field), aim=aim, fo=fo)
     q, d, ok = b.result.pos, b.result.dir, b.result.valid  # (F, W, 5, ...)
     tan = _crossing(q[:, :, 1], d[:, :, 1], q[:, :, 2], d[:, :, 2], 1)
     sag = _crossing(q[:, :, 3], d[:, :, 3], q[:, :, 4], d[:, :, 4], 0)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from lensopt.analysis.checks import fields_of
 from lensopt.analysis.checks import frequencies as check_frequencies
 from lensopt.analysis.mtf import MTF_METHODS, lens_mtf
 from lensopt.errors import LensoptError
@@ -58,7 +59,7 @@ def mtf_vs_field(lens: Lens, system: System, frequency: Tensor | list[float], *,
     (a count spread over 0 … 1, or the (F,) fields themselves)."""
     nu = check_frequencies(frequency, path="frequency", dtype=lens.dtype, device=lens.device)
     rel = (torch.linspace(0.0, 1.0, int(fields), dtype=lens.dtype, device=lens.device)
-           if isinstance(fields, int) else fields.to(lens.dtype))
+           if isinstance(fields, int) else fields_of(lens, system, fields))
     res = lens_mtf(lens, system, nu, rel_field=rel, method=_method(method), sampling=sampling)
     deg = torch.rad2deg(torch.atan(field_tangents(lens, system, rel)))
     return MtfField(frequency=nu, rel_field=rel, field_deg=deg, sagittal=res.sagittal, tangential=res.tangential,
@@ -101,8 +102,7 @@ def through_focus_mtf(lens: Lens, system: System, frequency: Tensor | list[float
     """MTF at ``frequency`` at every image shift ``focus_mm`` ((Z,) mm) for ``rel_field`` (default: the
     system's fields)."""
     nu = check_frequencies(frequency, path="frequency", dtype=lens.dtype, device=lens.device)
-    if rel_field is None:
-        rel_field = torch.tensor(system.rel_field, dtype=lens.dtype, device=lens.device)
+    rel_field = fields_of(lens, system, rel_field)
     focus = focus_mm.to(lens.dtype)
     if focus.dim() != 1 or focus.shape[0] < 1:
         raise LensoptError("needs a list of focus shifts", path="focus", got=focus.tolist())

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from lensopt.analysis.checks import fields_of
 from lensopt.analysis.psf_reference import debye_intensity
 from lensopt.analysis.wavefront import Wavefront, map_grid, trace_to_sphere, wavefront_stats
 from lensopt.optics.lens import Lens, System
@@ -77,7 +78,7 @@ def strehl(lens: Lens, system: System, *, rel_field: Tensor, pupil_samples: int 
     dt = lens.dtype
     fo = first_order(lens, system)
     pupil, inside = map_grid(pupil_samples, dtype=dt, device=lens.device)
-    st = trace_to_sphere(lens, system, pupil, rel_field=rel_field, fo=fo)
+    st = trace_to_sphere(lens, system, pupil, rel_field=fields_of(lens, system, rel_field), fo=fo)
     ok = st.valid & inside & st.chief_valid.unsqueeze(-1)
     lam_mm = lens.wavelength_um[None, :, None] * 1e-3
     w = torch.where(ok, (st.chief_opl.unsqueeze(-1) - st.opl) / lam_mm, torch.zeros_like(st.opl))

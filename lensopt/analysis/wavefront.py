@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from lensopt.analysis.checks import fields_of
 from lensopt.analysis.spot import safe_sqrt
 from lensopt.errors import LensoptError
 from lensopt.optics.bundle import Bundle, trace_bundle
@@ -237,7 +238,7 @@ def opd_fans(lens: Lens, system: System, *, points: int = 65, rel_field: Tensor 
     v = torch.linspace(-1.0, 1.0, points, dtype=lens.dtype, device=lens.device)
     zero = torch.zeros_like(v)
     pupil = torch.cat([torch.stack([zero, v], -1), torch.stack([v, zero], -1)])
-    wf = wavefront(lens, system, pupil, rel_field=rel_field, fo=fo)
+    wf = wavefront(lens, system, pupil, rel_field=fields_of(lens, system, rel_field), fo=fo)
     t, s = slice(0, points), slice(points, 2 * points)
     return OpdFans(coord=v, tangential=wf.opd[..., t], tangential_valid=wf.valid[..., t], sagittal=wf.opd[..., s],
                    sagittal_valid=wf.valid[..., s], rel_field=wf.rel_field, field_deg=wf.field_deg,
@@ -274,7 +275,7 @@ def wavefront_map(lens: Lens, system: System, *, n: int = 64, rel_field: Tensor 
     if n < 2:
         raise LensoptError("must be at least 2", path="grid", got=n)
     pts, inside = map_grid(n, dtype=lens.dtype, device=lens.device)
-    wf = wavefront(lens, system, pts, rel_field=rel_field, fo=fo)
+    wf = wavefront(lens, system, pts, rel_field=fields_of(lens, system, rel_field), fo=fo)
     ok = wf.valid & inside
     wf = Wavefront(**{**wf.__dict__, "valid": ok, "opd": torch.where(ok, wf.opd, torch.zeros_like(wf.opd))})
     shape = (*wf.opd.shape[:2], n, n)

@@ -19,8 +19,12 @@ from psf_lenses import build_oval
 from scipy.special import j1
 
 from lensopt.analysis.checks import frequencies, relative_fields, wavelength_indices
+from lensopt.analysis.encircled import geometric_energy
+from lensopt.analysis.field_curves import field_curves
 from lensopt.analysis.mtf import diffraction_limited_mtf, lens_mtf
 from lensopt.analysis.mtf_field import mtf_vs_field, through_focus_mtf
+from lensopt.analysis.strehl import strehl
+from lensopt.analysis.wavefront import opd_fans
 from lensopt.errors import LensoptError
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.paraxial import first_order
@@ -75,6 +79,15 @@ def test_field_past_the_field_of_view() -> None:
     assert str(err.value) == "field: relative field must lie in [0, 1] (1 = the full field, 20°) (got 1.2)"
     assert "\n" not in str(err.value)
     assert relative_fields(model.system, None).tolist() == [0.0, 0.7, 1.0]
+    past = torch.tensor([0.0, 1.5], dtype=torch.float64)
+    for call in (lambda: opd_fans(model.lens, model.system, rel_field=past),
+                 lambda: field_curves(model.lens, model.system, past),
+                 lambda: geometric_energy(model.lens, model.system, rel_field=past),
+                 lambda: strehl(model.lens, model.system, rel_field=past),
+                 lambda: through_focus_mtf(model.lens, model.system, [10.0], rel_field=past,
+                                           focus_mm=torch.zeros(1, dtype=torch.float64))):
+        with pytest.raises(LensoptError, match=r"^field: relative field must lie in \[0, 1\].*\(got 1.5\)$"):
+            call()
 
 
 def test_wavelength_not_in_the_spec() -> None:
