@@ -14,7 +14,10 @@ __all__ = ["accuracy_figure"]
 
 LABELS = {"esr": "ESR relative error", "rms": "worst-field RMS relative error",
           "aim": "ESR error of full aiming (vs 12 steps)", "psf": "PSF NRMSE vs FFT",
-          "sim": "simulated-image RMSE"}
+          "sim": "simulated-image RMSE", "wfe": "RMS wavefront error, relative",
+          "zernike": "Zernike coefficients (max |Δc|/max |c|)", "strehl": "Strehl ratio, absolute",
+          "seidel": "Seidel sums (closed form)", "field": "field curvature, relative",
+          "focal": "focal shift curve, relative", "ee": "encircled energy error", "mtf": "MTF, absolute"}
 
 
 def accuracy_figure(result: dict[str, Any], *, title: str = "") -> Figure:

@@ -21,6 +21,8 @@ psf_bins      estimation bins pitch/1, /2, /3             transform), averaged o
 diffraction   none / incoherent / heuristic
 sim_grid      PSF grid 1×1 … 8×6 (simulation)             image RMSE (and PSNR) against a 12×9 grid,
 sim_overlap   patch overlap 0 … 0.5                       36 fields, rings:48
+wavefront …   the designer's analyses: wavefront, zernike, strehl, seidel, field_curves, focal_shift,
+              encircled, encircled_diffraction, mtf_field, through_focus (``qa.accuracy_analyses``)
 ============  ==========================================  =============================================
 
 **The spot reference** is a product quadrature over the half pupil: Gauss–Legendre in the radius
@@ -60,14 +62,23 @@ KNOBS = {
     "rings": "esr", "rings_fixed": "esr", "grid": "esr", "float32": "esr", "compiled": "esr", "aim_steps": "aim",
     "psf_rings": "psf", "psf_kernel": "psf", "psf_bins": "psf", "diffraction": "psf",
     "sim_grid": "sim", "sim_overlap": "sim",
+    "wavefront": "wfe", "zernike": "zernike", "strehl": "strehl", "seidel": "seidel", "field_curves": "field",
+    "focal_shift": "focal", "encircled": "ee", "encircled_diffraction": "ee", "mtf_field": "mtf",
+    "through_focus": "mtf",
 }
 """Knob → the error it is scored by: ``esr`` (also RMS per field), ``aim`` (ESR error of the aiming alone),
-``psf`` (NRMSE), ``sim`` (image RMSE)."""
+``psf`` (NRMSE), ``sim`` (image RMSE); the analyses' metrics are in ``qa.accuracy_analyses``."""
+ANALYSES = ("wavefront", "zernike", "strehl", "seidel", "field_curves", "focal_shift", "encircled",
+            "encircled_diffraction", "mtf_field", "through_focus")
 DEFAULT_KNOBS = ("rings", "rings_fixed", "grid", "float32", "compiled", "aim_steps", "psf_rings", "psf_kernel",
-                 "psf_bins", "diffraction", "sim_grid", "sim_overlap")
+                 "psf_bins", "diffraction", "sim_grid", "sim_overlap", *ANALYSES)
 METRICS = {"esr": "ESR relative error", "rms": "worst-field RMS relative error",
            "aim": "ESR relative error of full aiming", "psf": "PSF NRMSE",
-           "sim": "simulated-image RMSE"}
+           "sim": "simulated-image RMSE", "wfe": "RMS wavefront error, relative",
+           "zernike": "Zernike coefficients, max |Δc|/max |c|", "strehl": "Strehl ratio, absolute",
+           "seidel": "Seidel sums (closed form)", "field": "field curvature, relative",
+           "focal": "focal shift curve, relative", "ee": "encircled energy (r80 relative / EE absolute)",
+           "mtf": "MTF, absolute"}
 
 
 @dataclass(frozen=True)
@@ -374,8 +385,9 @@ def run_accuracy(model: Model, *, knobs: Sequence[str] = DEFAULT_KNOBS, repeats:
     knobs = parse_knobs(",".join(knobs))
     report = progress or (lambda f, s: None)
     groups = [k for k in knobs if KNOBS[k] == "esr"]
+    analyses = [k for k in knobs if k in ANALYSES]
     steps = len(groups) + ("aim_steps" in knobs) + any(KNOBS[k] == "psf" for k in knobs) * 2 \
-        + any(KNOBS[k] == "sim" for k in knobs) * 2 + 1
+        + any(KNOBS[k] == "sim" for k in knobs) * 2 + bool(analyses) * 2 + 1
     done = 0
 
     def tick(what: str) -> None:
@@ -419,6 +431,13 @@ def run_accuracy(model: Model, *, knobs: Sequence[str] = DEFAULT_KNOBS, repeats:
         pts, reference["sim"] = _sim_points(model, sim_knobs, max(1, repeats // 2), lambda s: report(done / steps, s))
         points += pts
         tick("simulation done")
+    if analyses:
+        from lensopt.qa.accuracy_analyses import analysis_points
+
+        tick("analyses")
+        pts, reference["analyses"] = analysis_points(model, analyses, repeats, lambda s: report(done / steps, s))
+        points += pts
+        tick("analyses done")
     report(1.0, "done")
     return AccuracyResult(model.spec.name, points, reference, compile_s, {"knobs": list(knobs), "repeats": repeats})
 
