@@ -37,7 +37,6 @@ clipping make the integrand non-smooth: the loop then stops at its cap and says 
 from __future__ import annotations
 
 import math
-import statistics
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -51,6 +50,8 @@ from lensopt.errors import LensoptError
 from lensopt.optics.backend import use_backend
 from lensopt.optics.bundle import Bundle, trace_bundle
 from lensopt.optics.sampling import PupilSampling
+from lensopt.qa.accuracy_analyses import analysis_points
+from lensopt.qa.measure import Point, timed
 from lensopt.spec.build import Model
 
 __all__ = ["KNOBS", "DEFAULT_KNOBS", "Point", "AccuracyResult", "run_accuracy", "spot_reference",
@@ -79,17 +80,6 @@ METRICS = {"esr": "ESR relative error", "rms": "worst-field RMS relative error",
            "seidel": "Seidel sums (closed form)", "field": "field curvature, relative",
            "focal": "focal shift curve, relative", "ee": "encircled energy (r80 relative / EE absolute)",
            "mtf": "MTF, absolute"}
-
-
-@dataclass(frozen=True)
-class Point:
-    """One measured setting: ``errors`` by metric (relative/absolute as in ``METRICS``), median seconds."""
-
-    knob: str
-    setting: str
-    errors: dict[str, float]
-    time_s: float
-    note: str = ""
 
 
 @dataclass
@@ -200,15 +190,6 @@ def spot_reference(model: Model, *, aim: str | None = None, aim_steps: int | Non
             n *= 2
 
 
-def _timed(fn: Callable[[], Any], repeats: int) -> tuple[Any, float]:
-    times, out = [], None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return out, statistics.median(times)
-
-
 def _spot_points(model: Model, knob: str, ref: dict[str, Any], repeats: int) -> list[Point]:
     lens, system = model.lens, model.system
     fw = _field_weights(model)
@@ -233,7 +214,7 @@ def _spot_points(model: Model, knob: str, ref: dict[str, Any], repeats: int) -> 
 
         if backend == "compiled":
             run()  # compile outside the timing
-        (esr, rms), t = _timed(run, repeats)
+        (esr, rms), t = timed(run, repeats)
         e_esr = abs(float(esr) - ref_esr) / ref_esr
         e_rms = float(np.max(np.abs(rms.double().numpy() - ref_rms) / ref_rms))
         out.append(Point(knob, text + (" float32" if knob == "float32" else "") +
@@ -263,7 +244,7 @@ def _aim_points(model: Model, repeats: int) -> tuple[list[Point], dict[str, Any]
             with torch.no_grad(), use_backend("eager"):
                 b = trace_bundle(model.lens, model.system, pts, half_pupil=True, aim="full", aim_steps=steps)
                 return weighted_spot(b, wts, model.system.wavelength_weights, fw)[0]
-        esr, t = _timed(run, repeats)
+        esr, t = timed(run, repeats)
         out.append(Point("aim_steps", f"aim full, {steps} step(s)",
                          {"aim": abs(1e3 * float(esr) - ref["esr_um"]) / ref["esr_um"]}, t,
                          note=f"on the reference nodes; vs 12 steps ({ref['esr_um']:.4f} µm)"))
@@ -326,7 +307,7 @@ def _psf_points(model: Model, knobs: Sequence[str], repeats: int, pitch_um: floa
                 with torch.no_grad(), use_backend("eager"):
                     return compute_psfs(lens, system, rel, s).psf
 
-            psf, t = _timed(run, repeats)
+            psf, t = timed(run, repeats)
             out.append(Point(knob, label, {"psf": nrmse(psf)}, t))
     return out, info
 
@@ -369,7 +350,7 @@ def _sim_points(model: Model, knobs: Sequence[str], repeats: int,
     for knob in knobs:
         for label, kw in variants[knob]:
             progress(f"{knob}: {label}")
-            im, t = _timed(lambda kw=kw: simulate(**kw), repeats)
+            im, t = timed(lambda kw=kw: simulate(**kw), repeats)
             rmse = float(np.sqrt(np.mean((im.astype(np.float64) - ref) ** 2)))
             psnr = 20 * math.log10(1 / max(rmse, 1e-12))
             out.append(Point(knob, label, {"sim": rmse}, t, note=f"PSNR {psnr:.2f} dB"))
@@ -432,8 +413,6 @@ def run_accuracy(model: Model, *, knobs: Sequence[str] = DEFAULT_KNOBS, repeats:
         points += pts
         tick("simulation done")
     if analyses:
-        from lensopt.qa.accuracy_analyses import analysis_points
-
         tick("analyses")
         pts, reference["analyses"] = analysis_points(model, analyses, repeats, lambda s: report(done / steps, s))
         points += pts

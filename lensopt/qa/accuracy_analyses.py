@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 from lensopt.optics.backend import use_backend
-from lensopt.qa.accuracy import Point, _timed
+from lensopt.qa.measure import Point, timed
 from lensopt.spec.build import Model
 
 __all__ = ["ANALYSIS_KNOBS", "ANALYSIS_METRICS", "analysis_points"]
@@ -151,7 +151,7 @@ def analysis_points(model: Model, knobs: Sequence[str], repeats: int,
                 with torch.no_grad(), use_backend("eager"):
                     return fn(setting)
 
-            out, t = _timed(run, repeats)
+            out, t = timed(run, repeats)
             err = error(out, ref)
             note = "closed form, no sampling" if knob == "seidel" else _note(metric, err)
             points.append(Point(knob, label, {metric: err}, t, note=note))
