@@ -129,7 +129,7 @@ def run_joint(
         model = DistributedDataParallel(net)
     obj = RestoredObjective(problem.setup.camera, problem.opt.image or ImageSettings(), model, dist=dist,
                             device=device)
-    problem.image = obj
+    problem.use_image(obj)
 
     def evaluate_fn(t: torch.Tensor) -> Trial:
         ev = problem.evaluate(t)

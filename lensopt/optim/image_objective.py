@@ -1,5 +1,5 @@
 """Image-driven objectives (``[optimize] objective = "raw"``): training batches, rendering, the image
-loss, and its two residual terms in the registry.
+loss, and the values of its two residual terms (``optim.terms``: ``gtra`` and ``image_loss``).
 
 Each optimizer step draws a batch (S3.3.1): ``batch`` patches (dead-leaves scenes or random crops and
 flips of an image folder) paired with sensor tiles by the pseudo-random rule (tiles sorted by distance
@@ -18,7 +18,6 @@ import dataclasses
 import hashlib
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -45,10 +44,6 @@ from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling
 from lensopt.optim.gtra import GtraTarget, gtra_residual, gtra_target, psf_window
 from lensopt.optim.settings import ImageSettings
-from lensopt.optim.terms import Term, register_term
-
-if TYPE_CHECKING:
-    from lensopt.optim.problem import Problem
 
 __all__ = ["ImageObjective", "psnr_db"]
 
@@ -211,16 +206,3 @@ def _centroid(spots: Spots) -> Tensor:
     from lensopt.imaging.render import weighted_centroid
 
     return weighted_centroid(spots.xy, spots.valid, spots.wavelength_weights, spots.half)
-
-
-def _weight(mode: str):  # noqa: ANN202
-    def weight(p: Problem) -> float | None:
-        img = p.image
-        return None if img is None or img.mode != mode else img.spec.weight
-    return weight
-
-
-register_term(Term("gtra", "generalized transverse ray aberrations of the image loss (S66–S68)", _weight("gtra"),
-                   lambda c: c.problem.image.gtra(c.lens)), after="tra")
-register_term(Term("image_loss", "√(2 L) of the image loss (scalar, for Adam)", _weight("scalar"),
-                   lambda c: c.problem.image.scalar(c.lens)), after="gtra")

@@ -19,18 +19,16 @@ the primal's own classes with a trailing dimension of N variables.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Collection
+from typing import Any
 
 import torch
 from torch import Tensor
 
-from lensopt.optics.bundle import finish_bundle
-from lensopt.optics.differential import supported, trace_with_tangents
+from lensopt.optics.bundle import Bundle, Launch, finish_bundle
+from lensopt.optics.differential import trace_with_tangents
+from lensopt.optics.lens import Lens, System
 from lensopt.optics.trace import RayTrace
-
-if TYPE_CHECKING:
-    from lensopt.optim.problem import Problem
 
 __all__ = ["split", "tangent_leaves", "staged_jacobian"]
 
@@ -91,17 +89,18 @@ def tangent_leaves(primal: Any, tangent: Any) -> list[Tensor | None]:
     return out
 
 
-def staged_jacobian(problem: Problem, theta: Tensor) -> tuple[Tensor, Tensor] | None:
-    """(J (M, N), ℓ (M,)) of a spot-type ``problem`` at θ by stages A, B, C (module docstring), or None
-    where the stages do not apply (an image objective, a lens with a placement): the caller then
-    uses ``jacfwd`` over the whole residual function."""
-    if problem.image is not None or not supported(problem.setup.lens):
-        return None
+def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_of: Callable[[Lens], Launch],
+                    terms_of: Callable[[Tensor, Lens, Bundle], Tensor],
+                    hit_fields: Callable[[Bundle], Collection[str]], system: System) -> tuple[Tensor, Tensor]:
+    """(J (M, N), ℓ (M,)) at θ by stages A, B, C (module docstring), for the residual function
+    θ ↦ ``terms_of(θ, lens, finish_bundle(system, launch, trace(lens, launch.rays, record=True)))`` with
+    ``lens = lens_of(θ)``, ``launch = launch_of(lens)``; ``hit_fields(bundle)``: the recorded hit fields
+    the terms read (``Term.reads``). The lens must have no placement (``optics.differential.supported``)."""
     holder: dict[str, Any] = {}
 
     def stage_a(t: Tensor) -> tuple[tuple[Tensor, ...], tuple[tuple[Tensor, ...], tuple[Tensor, ...]]]:
-        lens, _ = problem.lens(t)
-        fl, ot, rebuild = split((lens, problem.launch(lens, theta)))
+        lens = lens_of(t)
+        fl, ot, rebuild = split((lens, launch_of(lens)))
         holder["rebuild"] = rebuild
         return tuple(fl), (tuple(fl), tuple(ot))
 
@@ -109,11 +108,9 @@ def staged_jacobian(problem: Problem, theta: Tensor) -> tuple[Tensor, Tensor] | 
     rebuild_a = holder["rebuild"]
     lens, start = rebuild_a(list(fl_a), list(ot_a))
     lens_dot, start_dot = rebuild_a(list(dots_a), list(ot_a))
-    system = problem.system
 
-    def reads(result: RayTrace) -> set[str]:
-        """The hit fields the active residual terms read at this trace (``Term.reads``)."""
-        return problem.hit_fields(finish_bundle(system, start, result))
+    def reads(result: RayTrace) -> Collection[str]:
+        return hit_fields(finish_bundle(system, start, result))
 
     result, result_dot = trace_with_tangents(lens, start.rays, lens_dot, start_dot.rays, hit_fields=reads)
     fl_b, ot_b, rebuild_b = split(result)
@@ -126,8 +123,7 @@ def staged_jacobian(problem: Problem, theta: Tensor) -> tuple[Tensor, Tensor] | 
         leaves_b = list(fl_b)  # fields without tangents stay the primal's (no term reads them)
         for i, v in zip(live_b, fl[n_a:], strict=True):
             leaves_b[i] = v
-        bundle = finish_bundle(system, start_c, rebuild_b(leaves_b, ot_b))
-        return torch.cat(list(problem._terms(t, lens_c, bundle).values()))
+        return terms_of(t, lens_c, finish_bundle(system, start_c, rebuild_b(leaves_b, ot_b)))
 
     # Duals need storage of their own: broadcast views (a direction shared by a bundle) are copied.
     primals = tuple(t.contiguous() for t in (theta, *fl_a, *(fl_b[i] for i in live_b)))

@@ -11,8 +11,10 @@ glass-catalog schedule) are row multipliers applied by the optimizer (``row_scal
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 from torch import Tensor
@@ -23,6 +25,7 @@ from lensopt.imaging.camera import Camera
 from lensopt.materials import Material, design_catalog
 from lensopt.materials.glass_space import GlassMesh, GlassSpace, glass_mesh, glass_space
 from lensopt.optics.bundle import Bundle, Launch, PupilShape, launch_bundle, trace_bundle
+from lensopt.optics.differential import supported
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling
@@ -34,7 +37,7 @@ from lensopt.optim.rays import head, with_rim
 from lensopt.optim.schedule import schedule_weight
 from lensopt.optim.settings import ImageSettings, OptimizeSettings
 from lensopt.optim.solves import Solve, apply_solves, solved_quantities
-from lensopt.optim.terms import TERMS, TermContext
+from lensopt.optim.terms import TERMS, TermContext, TermSetup, term
 from lensopt.optim.variables import Declared, Parameterization
 
 __all__ = ["Evaluation", "Problem", "ProblemSetup", "SurfaceInfo"]
@@ -170,8 +173,17 @@ class Problem:
             self.image = ImageObjective(setup.camera, self.opt.image or ImageSettings(), mode=mode,
                                         dtype=image_dtype)
         self._shape_memo: tuple[Tensor, PupilShape] | None = None
+        self.term_setup = TermSetup(
+            self.opt, self.objective, self.system, self.field_weights, self.num_glasses, tuple(self.interfaces),
+            tuple(s for s in self.interfaces if not self.surfaces[s].plane), tuple(self.path_spans),
+            self.failure_penalty, self.gap_bounds, self.param.glass_g, self.space, self.mesh, self.image)
         self.slices = self._layout()
         self.size = max((sl.stop for sl in self.slices.values()), default=0)
+
+    def use_image(self, image: ImageObjective | Any) -> None:
+        """Make ``image`` the image objective (``optim.joint`` puts its ``RestoredObjective`` here)."""
+        self.image = image
+        self.term_setup = dataclasses.replace(self.term_setup, image=image)
 
     # ------------------------------------------------------------------------------------ structure
 
@@ -184,8 +196,8 @@ class Problem:
         return len(self.param.of_kind("glass"))
 
     def _weight(self, group: str) -> float | None:
-        """Static weight of a registered term, None when it is off."""
-        return TERMS[group].weight(self)
+        """Static weight of a term, None when it is off."""
+        return term(group).weight(self.term_setup)
 
     def _layout(self) -> dict[str, slice]:
         with torch.no_grad():
@@ -290,18 +302,18 @@ class Problem:
         every ray, the rim rays included."""
         spot = head(bundle, self.num_spot)
         stats = spot_stats(spot, self.system.wavelength_weights, self.field_weights)
-        ctx = TermContext(self, theta, lens, bundle, spot, stats)
+        ctx = TermContext(self.term_setup, theta, lens, bundle, spot, stats)
         out: dict[str, Tensor] = {}
-        for name, term in TERMS.items():
-            w = term.weight(self)
+        for t in TERMS:
+            w = t.weight(self.term_setup)
             if w is None:
                 continue
-            out[name] = term.residual(ctx) * w
+            out[t.name] = t.residual(ctx) * w
         return out
 
     def hit_fields(self, bundle: Bundle) -> set[str]:
         """The recorded hit fields whose derivatives the active terms read at ``bundle`` (``Term.reads``)."""
-        return {f for name, term in TERMS.items() if term.weight(self) is not None for f in term.reads(bundle)}
+        return {f for t in TERMS if t.weight(self.term_setup) is not None for f in t.reads(bundle)}
 
     def residuals(self, theta: Tensor) -> Tensor:
         """(M,) ℓ(θ): the one residual function (pure in θ)."""
@@ -310,10 +322,14 @@ class Problem:
     def jacobian(self, theta: Tensor) -> tuple[Tensor, Tensor]:
         """(M, N) Jacobian by forward-mode AD and ℓ(θ) (M,): in stages (``optim.jacobian``) where they
         apply, else ``torch.func.jacfwd`` over the whole residual function (the same derivatives)."""
-        staged = staged_jacobian(self, theta)
-        if staged is not None:
-            return staged
-        return self.jacobian_jacfwd(theta)
+        if self.image is not None or not supported(self.setup.lens):
+            return self.jacobian_jacfwd(theta)
+        def terms_of(t: Tensor, lens: Lens, bundle: Bundle) -> Tensor:
+            return torch.cat(list(self._terms(t, lens, bundle).values()))
+
+        return staged_jacobian(theta, lens_of=lambda t: self.lens(t)[0],
+                               launch_of=lambda lens: self.launch(lens, theta), terms_of=terms_of,
+                               hit_fields=self.hit_fields, system=self.system)
 
     def jacobian_jacfwd(self, theta: Tensor) -> tuple[Tensor, Tensor]:
         """(M, N) Jacobian by ``torch.func.jacfwd`` over ``residuals`` and ℓ(θ) (M,): the reference."""
@@ -328,7 +344,7 @@ class Problem:
         """Weight schedules of the active groups (the glass-catalog one, and any group's own)."""
         out = {}
         for name in self.slices:
-            spec = TERMS[name].config(self)
+            spec = term(name).config(self.term_setup)
             knots = getattr(spec, "schedule", None)
             if knots:
                 out[name] = list(knots)

@@ -1,12 +1,13 @@
-"""The registry of residual terms (S2.2, Table S6; S3.1): one place to add a term.
+"""The residual terms (S2.2, Table S6; S3.1): one static, ordered tuple, ``TERMS``.
 
 A term is its name (the group name in ``Problem.slices`` and the progress display), a report line, its
-static weight (None = off) read from the problem's settings, the settings object that may carry a weight
-``schedule``, and its residual function of a ``TermContext`` (the lens, the traced optimization rays
-and their spot statistics at θ). ``Problem`` concatenates the active terms in registry order.
+static weight (None = off) read from the problem's ``TermSetup``, the settings object that may carry a
+weight ``schedule``, its residual function of a ``TermContext`` (the lens, the traced optimization rays
+and their spot statistics at θ), and the recorded hit fields whose derivatives it reads. ``Problem``
+concatenates the active terms in the order of ``TERMS``; no import can change that order.
 
-To add a term: write its residual function (pure tensors, fixed length, DESIGN.md rule 1) and call
-``register_term`` (``lensopt.optim.gtra`` registers ℓ_GTRA this way).
+To add a term: write its residual function (pure tensors, fixed length, DESIGN.md rule 1) and put a
+``Term`` into ``TERMS`` where its rows belong.
 """
 
 from __future__ import annotations
@@ -19,16 +20,53 @@ import torch
 from torch import Tensor
 
 from lensopt.analysis.spot import SpotStats
-from lensopt.materials.glass_space import catalog_distance, mesh_distance
+from lensopt.materials.glass_space import GlassMesh, GlassSpace, catalog_distance, mesh_distance
 from lensopt.optics.bundle import Bundle
 from lensopt.optics.differential import HIT_FIELDS
-from lensopt.optics.lens import Lens
+from lensopt.optics.lens import Lens, System
 from lensopt.optim import residuals as res
+from lensopt.optim.settings import OptimizeSettings
 
 if TYPE_CHECKING:
-    from lensopt.optim.problem import Problem
+    from lensopt.optim.image_objective import ImageObjective
 
-__all__ = ["TermContext", "Term", "TERMS", "register_term"]
+__all__ = ["TermSetup", "TermContext", "Term", "TERMS", "term"]
+
+
+@dataclass(frozen=True)
+class TermSetup:
+    """What the residual terms know of their problem (plain data; ``Problem`` makes it once).
+
+    Attributes:
+        settings: the optimization settings (weights, constraints, schedules).
+        objective: ``spot``, ``raw`` or ``restored``.
+        system: aperture, fields, wavelength weights.
+        field_weights: (F,) weights of the fields.
+        num_glasses: glass variables in θ.
+        interfaces: surfaces with a change of medium (or a diffractive phase): the ray-angle surfaces.
+        refracting: those of ``interfaces`` that are not planes: the surface-normal surfaces.
+        path_spans: ``ray_path.spans`` as (first, end surface, lower, upper).
+        failure_penalty: mm, the constant of a failed ray's row.
+        gap_bounds: lens ↦ ((S,), (S,)) lower and upper axial ray path per gap.
+        glass_g: θ ↦ (G, d) whitened glass coordinates.
+        space, mesh: the glass space and its mesh (None without glass variables or the mesh term).
+        image: the image objective (objective ``raw``), or None.
+    """
+
+    settings: OptimizeSettings
+    objective: str
+    system: System
+    field_weights: Tensor
+    num_glasses: int
+    interfaces: tuple[int, ...]
+    refracting: tuple[int, ...]
+    path_spans: tuple[tuple[int, int, float, float], ...]
+    failure_penalty: float
+    gap_bounds: Callable[[Lens], tuple[Tensor, Tensor]]
+    glass_g: Callable[[Tensor], Tensor]
+    space: GlassSpace | None = None
+    mesh: GlassMesh | None = None
+    image: ImageObjective | None = None
 
 
 @dataclass(frozen=True)
@@ -36,14 +74,14 @@ class TermContext:
     """What a residual function sees at θ.
 
     Attributes:
-        problem: the problem (settings, glass space, gap bounds...).
+        setup: the problem's ``TermSetup``.
         theta: (N,) variables.
         lens: the solved lens of θ.
         bundle: every optimization ray (spot sample + rim rays), traced with ``record=True``.
         spot: the spot sample part of ``bundle``; stats: its spot statistics.
     """
 
-    problem: Problem
+    setup: TermSetup
     theta: Tensor
     lens: Lens
     bundle: Bundle
@@ -58,103 +96,101 @@ class Term:
     Attributes:
         name: group name (``Problem.slices`` key, glossary name of DESIGN.md).
         label: one report line (what it measures, where in the seed).
-        weight: problem ↦ static weight, or None when the term is off.
+        weight: setup ↦ static weight, or None when the term is off.
         residual: context ↦ (M_t,) unweighted residuals, length fixed by the problem.
-        config: problem ↦ the settings object of the term (its ``schedule`` is used), or None.
+        config: setup ↦ the settings object of the term (its ``schedule`` is used), or None.
         reads: bundle ↦ the fields of the recorded hits (``SurfaceHit``) whose derivatives the
             residual needs at this bundle (``optim.jacobian`` computes only those); all by default.
     """
 
     name: str
     label: str
-    weight: Callable[[Problem], float | None]
+    weight: Callable[[TermSetup], float | None]
     residual: Callable[[TermContext], Tensor]
-    config: Callable[[Problem], Any] = lambda p: None
+    config: Callable[[TermSetup], Any] = lambda s: None
     reads: Callable[[Bundle], Collection[str]] = lambda b: HIT_FIELDS
 
 
-TERMS: dict[str, Term] = {}
-"""The registered terms, in residual order."""
+def _cons(name: str) -> Callable[[TermSetup], Any]:
+    return lambda s: getattr(s.settings.constraints, name)
 
 
-def register_term(term: Term, *, after: str | None = None) -> Term:
-    """Add (or replace) ``term``; placed after the term ``after`` (default: at the end)."""
-    items = [(k, v) for k, v in TERMS.items() if k != term.name]
-    pos = len(items) if after is None else [k for k, _ in items].index(after) + 1
-    items.insert(pos, (term.name, term))
-    TERMS.clear()
-    TERMS.update(items)
-    return term
-
-
-def _cons(name: str) -> Callable[[Problem], Any]:
-    return lambda p: getattr(p.opt.constraints, name)
-
-
-def _cons_weight(name: str) -> Callable[[Problem], float | None]:
-    def weight(p: Problem) -> float | None:
-        spec = getattr(p.opt.constraints, name)
+def _cons_weight(name: str) -> Callable[[TermSetup], float | None]:
+    def weight(s: TermSetup) -> float | None:
+        spec = getattr(s.settings.constraints, name)
         return None if spec is None else spec.weight
     return weight
 
 
-def _glass_weight(name: str) -> Callable[[Problem], float | None]:
-    def weight(p: Problem) -> float | None:
-        spec = getattr(p.opt.constraints, name)
-        if p.num_glasses == 0 or spec is None:
+def _glass_weight(name: str) -> Callable[[TermSetup], float | None]:
+    def weight(s: TermSetup) -> float | None:
+        spec = getattr(s.settings.constraints, name)
+        if s.num_glasses == 0 or spec is None:
             return None
         return spec.weight if name == "glass_mesh" else 1.0
     return weight
 
 
-def _refracting(c: TermContext) -> list[int]:
-    return [s for s in c.problem.interfaces if not c.problem.surfaces[s].plane]
+def _image_weight(mode: str) -> Callable[[TermSetup], float | None]:
+    def weight(s: TermSetup) -> float | None:
+        img = s.image
+        return None if img is None or img.mode != mode else img.spec.weight
+    return weight
 
 
-register_term(Term(
-    "tra", "transverse ray aberrations about the field centroids, ‖ℓ‖ = ESR (S37–S39)",
-    lambda p: p.opt.tra.weight if p.objective == "spot" else None,
-    lambda c: res.tra(c.spot, c.stats, c.problem.system.wavelength_weights, c.problem.field_weights),
-    lambda p: p.opt.tra, reads=lambda b: ()))
 def _ray_path(c: TermContext) -> Tensor:
-    r = res.ray_path(c.bundle, *c.problem.gap_bounds(c.lens))
-    if not c.problem.path_spans:
+    r = res.ray_path(c.bundle, *c.setup.gap_bounds(c.lens))
+    if not c.setup.path_spans:
         return r
-    return torch.cat([r, res.ray_path_spans(c.bundle, c.problem.path_spans)])
+    return torch.cat([r, res.ray_path_spans(c.bundle, list(c.setup.path_spans))])
 
 
-register_term(Term(
-    "ray_path", "axial ray path per gap (and per span of gaps) within its bounds (S41–S42)",
-    _cons_weight("ray_path"), _ray_path, _cons("ray_path"), reads=lambda b: ("pos",)))
-register_term(Term(
-    "ray_angle", "angles of incidence and refraction (S43–S45)", _cons_weight("ray_angle"),
-    lambda c: res.ray_angle(c.bundle, c.problem.interfaces, c.problem.opt.constraints.ray_angle.max_deg),
-    _cons("ray_angle"), reads=lambda b: ("cos2_in", "cos2_out")))
-register_term(Term(
-    "surface_normal", "surface normal angles where rays hit (S46–S47)", _cons_weight("surface_normal"),
-    lambda c: res.surface_normal(c.bundle, _refracting(c), c.problem.opt.constraints.surface_normal.max_deg),
-    _cons("surface_normal"), reads=lambda b: ("normal",)))
-register_term(Term(
-    "distortion", "distortion per field (S48–S50)", _cons_weight("distortion"),
-    lambda c: res.distortion(c.lens, c.problem.system, c.spot, c.stats,
-                             c.problem.opt.constraints.distortion.max_percent / 100),
-    _cons("distortion"), reads=lambda b: ()))
-register_term(Term(
-    "relative_illumination", "relative illumination per field (S52–S54)", _cons_weight("relative_illumination"),
-    lambda c: res.relative_illumination(c.spot, c.problem.system.wavelength_weights,
-                                        c.problem.opt.constraints.relative_illumination.min),
-    _cons("relative_illumination"), reads=lambda b: ()))
-register_term(Term(
-    "glass_mesh", "glass variables to the catalog mesh (S55)", _glass_weight("glass_mesh"),
-    lambda c: mesh_distance(c.problem.param.glass_g(c.theta), c.problem.mesh), _cons("glass_mesh"),
-    reads=lambda b: ()))
-register_term(Term(
-    "glass_catalog", "glass variables to the nearest catalog glass (S56–S57)", _glass_weight("glass_catalog"),
-    lambda c: catalog_distance(c.problem.param.glass_g(c.theta), c.problem.space), _cons("glass_catalog"),
-    reads=lambda b: ()))
-register_term(Term(
-    "ray_failure", "a constant plus the failure margin for every failed ray",
-    lambda p: p.opt.constraints.ray_failure.weight or None,
-    lambda c: res.failures(c.bundle, c.lens, c.problem.failure_penalty),
+def _nothing(bundle: Bundle) -> Collection[str]:
+    return ()
+
+
+TERMS: tuple[Term, ...] = (
+    Term("tra", "transverse ray aberrations about the field centroids, ‖ℓ‖ = ESR (S37–S39)",
+         lambda s: s.settings.tra.weight if s.objective == "spot" else None,
+         lambda c: res.tra(c.spot, c.stats, c.setup.system.wavelength_weights, c.setup.field_weights),
+         lambda s: s.settings.tra, _nothing),
+    Term("gtra", "generalized transverse ray aberrations of the image loss (S66–S68)", _image_weight("gtra"),
+         lambda c: c.setup.image.gtra(c.lens)),
+    Term("image_loss", "√(2 L) of the image loss (scalar, for Adam)", _image_weight("scalar"),
+         lambda c: c.setup.image.scalar(c.lens)),
+    Term("ray_path", "axial ray path per gap (and per span of gaps) within its bounds (S41–S42)",
+         _cons_weight("ray_path"), _ray_path, _cons("ray_path"), lambda b: ("pos",)),
+    Term("ray_angle", "angles of incidence and refraction (S43–S45)", _cons_weight("ray_angle"),
+         lambda c: res.ray_angle(c.bundle, list(c.setup.interfaces), c.setup.settings.constraints.ray_angle.max_deg),
+         _cons("ray_angle"), lambda b: ("cos2_in", "cos2_out")),
+    Term("surface_normal", "surface normal angles where rays hit (S46–S47)", _cons_weight("surface_normal"),
+         lambda c: res.surface_normal(c.bundle, list(c.setup.refracting),
+                                      c.setup.settings.constraints.surface_normal.max_deg),
+         _cons("surface_normal"), lambda b: ("normal",)),
+    Term("distortion", "distortion per field (S48–S50)", _cons_weight("distortion"),
+         lambda c: res.distortion(c.lens, c.setup.system, c.spot, c.stats,
+                                  c.setup.settings.constraints.distortion.max_percent / 100),
+         _cons("distortion"), _nothing),
+    Term("relative_illumination", "relative illumination per field (S52–S54)", _cons_weight("relative_illumination"),
+         lambda c: res.relative_illumination(c.spot, c.setup.system.wavelength_weights,
+                                             c.setup.settings.constraints.relative_illumination.min),
+         _cons("relative_illumination"), _nothing),
+    Term("glass_mesh", "glass variables to the catalog mesh (S55)", _glass_weight("glass_mesh"),
+         lambda c: mesh_distance(c.setup.glass_g(c.theta), c.setup.mesh), _cons("glass_mesh"), _nothing),
+    Term("glass_catalog", "glass variables to the nearest catalog glass (S56–S57)", _glass_weight("glass_catalog"),
+         lambda c: catalog_distance(c.setup.glass_g(c.theta), c.setup.space), _cons("glass_catalog"), _nothing),
     # The failure margins read the hits of failed rays; with none failed the term is constant.
-    reads=lambda b: HIT_FIELDS if bool((~b.result.valid).any()) else ()))
+    Term("ray_failure", "a constant plus the failure margin for every failed ray",
+         lambda s: s.settings.constraints.ray_failure.weight or None,
+         lambda c: res.failures(c.bundle, c.lens, c.setup.failure_penalty),
+         reads=lambda b: HIT_FIELDS if bool((~b.result.valid).any()) else ()),
+)
+"""Every residual term, in residual order (static: the same order whatever was imported)."""
+
+
+def term(name: str) -> Term:
+    """The term called ``name``."""
+    for t in TERMS:
+        if t.name == name:
+            return t
+    raise KeyError(name)

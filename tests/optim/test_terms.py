@@ -1,34 +1,50 @@
-"""The residual-term registry: adding a term is one ``register_term`` call; Problem concatenates the
-active terms in registry order with their static weights."""
+"""The residual terms: one static, ordered tuple (``optim.terms.TERMS``); Problem concatenates the active
+terms in that order with their static weights, whatever modules were imported before."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
+import pytest
 import torch
 
+import lensopt.optim.problem as problem_module
 from lensopt.design import build_problem
 from lensopt.optim import Problem
-from lensopt.optim.terms import TERMS, Term, register_term
+from lensopt.optim.terms import TERMS, Term
 from lensopt.spec import parse_spec
 
 
-def test_a_registered_term_joins_the_residuals_with_its_weight(cooke) -> None:  # noqa: ANN001
+def test_the_rows_follow_the_order_of_terms(cooke) -> None:  # noqa: ANN001
+    cooke["surfaces"][0]["vary"] = ["radius"]
+    p = build_problem(parse_spec(cooke))
+    order = [t.name for t in TERMS]
+    names = list(p.slices)
+    assert names == sorted(names, key=order.index)
+    assert names[0] == "tra"
+
+
+def test_the_order_does_not_depend_on_imports() -> None:
+    # Importing the image objective first (it once registered its terms at import time) changes nothing.
+    code = ("import lensopt.optim.image_objective, lensopt.optim.terms as t; "
+            "print(','.join(x.name for x in t.TERMS))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    assert out == ",".join(t.name for t in TERMS)
+
+
+def test_a_term_joins_the_residuals_with_its_weight(cooke, monkeypatch: pytest.MonkeyPatch) -> None:  # noqa: ANN001
     cooke["surfaces"][0]["vary"] = ["radius"]
     spec = parse_spec(cooke)
     base = build_problem(spec)
-    term = Term("centre_height", "test: y of each field's centroid", lambda p: 3.0,
-                lambda c: c.stats.centroid[:, 1])
-    register_term(term, after="tra")
-    try:
-        p = build_problem(spec)
-        names = list(p.slices)
-        assert names[names.index("tra") + 1] == "centre_height"
-        parts = p.terms(p.theta0)
-        torch.testing.assert_close(parts["centre_height"], 3.0 * parts["tra"].new_tensor(
-            [float(v) for v in _centroids(p)]))
-        assert p.size == base.size + len(spec.system.field.relative)
-    finally:
-        del TERMS["centre_height"]
-    assert "centre_height" not in build_problem(spec).slices
+    extra = Term("centre_height", "test: y of each field's centroid", lambda s: 3.0, lambda c: c.stats.centroid[:, 1])
+    monkeypatch.setattr(problem_module, "TERMS", (TERMS[0], extra, *TERMS[1:]))
+    p = build_problem(spec)
+    names = list(p.slices)
+    assert names[names.index("tra") + 1] == "centre_height"
+    parts = p.terms(p.theta0)
+    torch.testing.assert_close(parts["centre_height"], 3.0 * _centroids(p))
+    assert p.size == base.size + len(spec.system.field.relative)
 
 
 def _centroids(p: Problem) -> torch.Tensor:
