@@ -13,6 +13,7 @@
     restore.py    train-irm, restore; optimize with objective = "restored" (the joint run, torchrun)
     tolerance.py  tolerance
     sweep.py      sweep
+    design.py     design (the seed's procedure: multi-start or basin hopping until the best agree)
     qa.py         check, accuracy
     warmup.py     warmup
 

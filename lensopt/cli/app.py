@@ -14,7 +14,7 @@ from typing import Annotated
 import typer
 
 from lensopt import __version__
-from lensopt.cli import formats, optimize, plot, qa, restore, simulate, sweep, tolerance, trace, warmup
+from lensopt.cli import design, formats, optimize, plot, qa, restore, simulate, sweep, tolerance, trace, warmup
 from lensopt.cli.common import LensoptGroup, LowerLevelFormatter
 from lensopt.cli.signals import state
 from lensopt.errors import LensoptError
@@ -23,8 +23,8 @@ __all__ = ["app"]
 
 # The commands in the order ``lensopt --help`` lists them (the ``plot`` group comes last).
 ORDER = ("trace", "ray", "export-codev", "import-codev", "simulate", "check", "accuracy", "evaluate", "tolerance",
-         "export-zemax", "import-zemax", "train-irm", "restore", "optimize", "sweep", "warmup")
-GROUPS = (trace, formats, simulate, qa, tolerance, restore, optimize, sweep, warmup)
+         "export-zemax", "import-zemax", "train-irm", "restore", "optimize", "sweep", "design", "warmup")
+GROUPS = (trace, formats, simulate, qa, tolerance, restore, optimize, sweep, design, warmup)
 
 app = typer.Typer(cls=LensoptGroup, add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   rich_markup_mode=None,

@@ -38,6 +38,7 @@ if TYPE_CHECKING:
     from lensopt.spec import Model
 
 __all__ = ["AimOpt", "AimStepsOpt", "BackendOpt", "DeviceOpt", "EX_INTERNAL", "JsonOpt", "LensArg", "LensoptGroup",
+           "check_scheduler",
            "LowerLevelFormatter", "SamplingOpt", "SeedOpt", "check_aim", "check_aim_steps", "check_output",
            "check_seed", "console", "err_console", "handle_errors", "load_model", "parse_frequencies",
            "parse_sampling", "print_json", "with_backend"]
@@ -256,3 +257,13 @@ class LowerLevelFormatter(logging.Formatter):
 
     def format(self, record: logging.LogRecord) -> str:
         return " ".join(super().format(record).split()).replace(record.levelname, record.levelname.lower(), 1)
+
+
+def check_scheduler(scheduler: str) -> str | None:
+    """``--scheduler``: None for serial, else ``local`` or a Dask scheduler address."""
+    if scheduler == "serial":
+        return None
+    if scheduler == "local" or "://" in scheduler or (":" in scheduler and scheduler.rsplit(":", 1)[1].isdigit()):
+        return scheduler
+    raise LensoptError("expected local, serial or a Dask scheduler address (tcp://host:8786)", path="--scheduler",
+                       got=scheduler)

@@ -14,7 +14,7 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from lensopt.cli.common import JsonOpt, SeedOpt, console, err_console, handle_errors, print_json
+from lensopt.cli.common import JsonOpt, SeedOpt, check_scheduler, console, err_console, handle_errors, print_json
 from lensopt.cli.signals import report_signal, signal_word, state
 from lensopt.errors import LensoptError
 
@@ -137,15 +137,6 @@ def render_table(console: Console, result: SweepResult, outdir: Path) -> None:
         console.print(f"[yellow]failed start:[/] {why}", highlight=False)
 
 
-def _check_scheduler(scheduler: str) -> str | None:
-    if scheduler == "serial":
-        return None
-    if scheduler == "local" or "://" in scheduler or (":" in scheduler and scheduler.rsplit(":", 1)[1].isdigit()):
-        return scheduler
-    raise LensoptError("expected local, serial or a Dask scheduler address (tcp://host:8786)", path="--scheduler",
-                       got=scheduler)
-
-
 @commands.command("sweep", short_help="Run a spec over a grid of values with multi-start optimization (Dask or "
                                      "serial); resumable.")
 @handle_errors
@@ -181,7 +172,7 @@ def sweep(
     from lensopt.study.keys import parse_vary
     from lensopt.study.sweep import Settings, expand_grid, run_sweep
 
-    sched = _check_scheduler(scheduler)
+    sched = check_scheduler(scheduler)
     base = load_spec(spec)
     try:
         text = spec.read_text(encoding="utf-8")

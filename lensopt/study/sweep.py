@@ -253,7 +253,7 @@ def manifest(spec_text: str, varies: Sequence[Vary], settings: Settings) -> dict
     return {"version": MANIFEST_VERSION, "hash": digest, **args}
 
 
-def prepare_outdir(outdir: Path, man: dict[str, Any], *, restart: bool = False) -> None:
+def prepare_outdir(outdir: Path, man: dict[str, Any], *, restart: bool = False, what: str = "sweep") -> None:
     """Check that ``outdir`` is new, empty or a sweep of the same manifest (else ``LensoptError``,
     ``--output``); with ``restart`` clear a previous sweep there first. Writes the manifest."""
     mpath = outdir / "manifest.json"
@@ -266,29 +266,31 @@ def prepare_outdir(outdir: Path, man: dict[str, Any], *, restart: bool = False) 
             old = {}
         if old.get("hash") != man["hash"]:
             if not restart:
-                raise LensoptError("holds a sweep made with another spec or other arguments (manifest hash "
+                raise LensoptError(f"holds a {what} made with another spec or other arguments (manifest hash "
                                    f"{str(old.get('hash'))[:12]} ≠ {man['hash'][:12]}); use --restart to start "
                                    "it over, or another folder", path="--output", got=str(outdir))
         elif not restart:
             return
         _clear(outdir)
     elif outdir.is_dir() and any(outdir.iterdir()):
-        raise LensoptError("exists and is not a sweep folder (no manifest.json); give a new or empty folder",
+        raise LensoptError(f"exists and is not a {what} folder (no manifest.json); give a new or empty folder",
                            path="--output", got=str(outdir))
     write_text_atomic(mpath, json.dumps(man, indent=2) + "\n")
 
 
 def _clear(outdir: Path) -> None:
-    """Remove what a sweep writes (and nothing else)."""
+    """Remove what a sweep or a design run (``study.procedure``) writes (and nothing else)."""
     if (outdir / "points").is_dir():
         shutil.rmtree(outdir / "points")
     for p in outdir.iterdir():
-        if p.name in ("manifest.json", "sweep.json", "sweep.csv", "sweep.png") or (
+        if p.name in ("manifest.json", "sweep.json", "sweep.csv", "sweep.png", "design.json", "best.json") or (
                 p.name.startswith("best_") and p.suffix == ".json"):
             p.unlink()
 
 
-def _load_record(outdir: Path, task: Task) -> dict[str, Any] | None:
+def load_record(outdir: Path, task: Task) -> dict[str, Any] | None:
+    """The record of ``task`` written by an earlier run into ``outdir`` (None if there is none, or if
+    it says finished but its lens file is missing)."""
     path = outdir / "points" / f"{task.name}.json"
     if not path.is_file():
         return None
@@ -301,7 +303,8 @@ def _load_record(outdir: Path, task: Task) -> dict[str, Any] | None:
     return rec
 
 
-def _save_record(outdir: Path, task: Task, record: dict[str, Any], lens_json: str | None) -> None:
+def save_record(outdir: Path, task: Task, record: dict[str, Any], lens_json: str | None) -> None:
+    """Write a task's record (and its lens first: a record on disk means its lens is complete)."""
     if lens_json is not None:  # the lens first: a record on disk means its lens is complete
         write_text_atomic(outdir / "points" / f"{task.name}.lens.json", lens_json)
     write_text_atomic(outdir / "points" / f"{task.name}.json", json.dumps(record, indent=2) + "\n")
@@ -408,7 +411,7 @@ def run_sweep(spec: LensSpec, spec_text: str, varies: Sequence[Vary], settings: 
     records: dict[tuple[int, int], dict[str, Any]] = {}
     todo = []
     for t in tasks:
-        rec = _load_record(outdir, t)
+        rec = load_record(outdir, t)
         if rec is None:
             todo.append(t)
         else:
@@ -421,7 +424,7 @@ def run_sweep(spec: LensSpec, spec_text: str, varies: Sequence[Vary], settings: 
     def done(i: int, out: tuple[dict[str, Any], str | None]) -> None:
         t = todo[i]
         record, lens_json = out
-        _save_record(outdir, t, record, lens_json)
+        save_record(outdir, t, record, lens_json)
         records[(t.point, t.start)] = record
         result.computed += 1
         if callback is not None:
