@@ -17,11 +17,11 @@ checks equality with it, rows with x = 0 exactly included).
 
 The selection depends on θ, so this is an eager path: it never runs inside a captured graph.
 
-**Not used by the optimizer**: measured, it does not pay (``benchmarks/jacobian_cost.py --rows --clock
+**Not used by the optimizer**: measured, it does not pay (``benchmarks/optimize/jacobian_cost.py --rows --clock
 cpu``: 1.07× the CPU time of eager ``jacfwd`` on the C-mount start, 1.10× on the Cooke): the extra
 tangent-free evaluation of ℓ and the gathers cost as much as the skipped rows' tangent work, which is a
 small part of the Jacobian (the trace's tangents are the bulk). Kept as the measured, tested
-alternative (benchmarks/RESULTS.md, issue 14 session 21).
+alternative (the benchmark diary in git history: ``git log -- benchmarks/RESULTS.md``).
 """
 
 from __future__ import annotations
