@@ -58,3 +58,14 @@ def test_results_page_names_existing_scripts_and_records() -> None:
     assert named, "the results page names no script"
     missing = sorted(n for n in named if not (ROOT / n).exists())
     assert not missing, missing
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_named_repository_files_exist(page: Path) -> None:
+    """Scripts, records, specs and tests the pages name (``benchmarks/…``, ``specs/…``, ``tests/….py``) exist."""
+    text = page.read_text()
+    named = set(re.findall(r"(?<![\w/])(?:benchmarks|specs|lenses|tests)/[\w/.\-]+\.(?:py|sh|json|toml|md|zmx|seq|agf)",
+                           text))
+    named.discard("benchmarks/RESULTS.md")  # the old diary, named for `git log`
+    missing = sorted(n for n in named if not (ROOT / n).exists())
+    assert not missing, missing
