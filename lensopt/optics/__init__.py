@@ -8,10 +8,12 @@
     placement.py   decentered and tilted surfaces (rigid frames)
     paraxial.py    first-order optics (y–ω transfer matrices)
     sampling.py    pupil sampling schemes and object-space ray bundles
-    aiming.py      ray aiming (chief, full)
+    aiming.py      ray aiming (chief, full); its detached solves can be handed back (ChiefSolve, FullSolve)
     vignetting.py  vignetting factors: the pupil per field and wavelength
-    trace.py       the eager sequential trace, RayTrace, failure reasons
-    bundle.py      trace a system: aiming + vignetting + trace
+    trace.py       the eager sequential trace (one step function per surface), RayTrace, failure reasons
+    differential.py  the trace's derivatives surface by surface (local derivatives chained): the LM Jacobian
+    transforms.py  what the core may do under torch transforms: stop solves early, skip derivative-only work
+    bundle.py      trace a system: aiming + vignetting (launch_bundle) + trace (finish_bundle)
     backend.py     which trace runs (eager | torch.compile | AOT package)
     compiled.py    the torch.compile kernel
     aot.py         AOT-compiled trace packages on disk

@@ -2,7 +2,7 @@
 
 ``torch.compile`` (``optics.compiled``) pays Dynamo's tracing and Inductor's cache look-ups in *every*
 process: ≈ 20 s per structure on the loaded 2-core machine even with a warm on-disk cache
-(benchmarks/RESULTS.md, issue 13 session 21), while the commands' eager traces take under a second. So
+(benchmarks/README.md, trace), while the commands' eager traces take under a second. So
 those commands could never use it. AOTInductor instead writes the compiled kernel into a package (a
 ``.pt2`` zip holding a shared library), built from one fixed input shape: ``AOT_CHUNK`` rays in the
 component-major layout of ``compiled.component_major_rays``. A later process loads it through

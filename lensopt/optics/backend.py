@@ -1,7 +1,7 @@
 """Which trace runs: the eager ``trace``, an AOT-compiled package (``optics.aot``) or ``torch.compile``.
 
 All give the same ``RayTrace`` (to ~1e-14 mm; tests hold them to 1e-12 mm). They differ in cost
-(benchmarks/RESULTS.md, issue 13 session 21, measured on the loaded 2-core machine):
+(benchmarks/README.md, trace; measured on the loaded 2-core machine):
 
 - eager: no start-up; every op writes a full array, and each call costs a fixed ≈ 5–20 ms of Python
   dispatch (large batches run in cache-sized chunks, ``trace.CHUNK_RAYS``);

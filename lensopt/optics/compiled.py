@@ -18,7 +18,7 @@ kernel; ``near_only_surfaces``), outputs written component-major (``pos``/``dir`
 of (3, *B) planes, like rays from ``component_major_rays``). tests/optics/test_trace_kernel.py runs
 that formulation eagerly against ``trace`` on hard cases.
 
-What it buys on CPU today (benchmarks/RESULTS.md issue 14, Cooke triplet, 1e6 rays, one thread):
+What it buys on CPU today (benchmarks/README.md, trace; Cooke triplet, 1e6 rays, one thread):
 ≈ 10× optiland's tracer in float64 (≈ 9× the chunked eager trace), within ≈ 2× of a bare
 sphere-and-Snell sketch, with peak memory only that of the outputs. The whole surface loop is one
 fused SIMD loop over the rays: the trace internals are component-wise, rays are read
@@ -202,5 +202,5 @@ def _make_compiled(key: _Key) -> Callable[..., Any]:
     # the caller turns into the eager fallback (or raises with ``fallback=False``, as the tests do).
     # max_fusion_size: Inductor's default (64 nodes per fused kernel) cuts the surface loop into a
     # few kernels joined by ~100 ray-sized buffers; one kernel over the whole loop keeps the rays in
-    # registers (2.5× faster at 1e6 rays on the Cooke triplet, benchmarks/RESULTS.md).
+    # registers (2.5× faster at 1e6 rays on the Cooke triplet, git history of benchmarks/RESULTS.md).
     return torch.compile(fresh, fullgraph=True, options={"max_fusion_size": _MAX_FUSION_SIZE})

@@ -28,7 +28,7 @@ def _safe_div(num: Tensor, den: Tensor) -> Tensor:
 
 Vec3 = tuple[Tensor, Tensor, Tensor]
 """A vector field as its three components: the hot loop works on (x, y, z) tensors of shape (*)
-because fused kernels then vectorize over rays (see benchmarks/RESULTS.md, "Trace speed"); the
+because fused kernels then vectorize over rays (see benchmarks/README.md, trace); the
 public functions take and return ``(*, 3)`` tensors."""
 
 
@@ -65,7 +65,7 @@ def quadric_flag_xyz(p: Vec3, d: Vec3, c: Tensor, k: Tensor, *, shortcuts: bool 
 
     The masks are combined by selects on comparisons, never by boolean algebra: inside a
     ``torch.compile``-d trace, Inductor's C++ backend converts every boolean ``&``/``|``/``~`` lane by
-    lane between mask formats, which cost more than the arithmetic (benchmarks/RESULTS.md, issue 14).
+    lane between mask formats, which cost more than the arithmetic (git history of benchmarks/RESULTS.md).
     The values are those of the boolean formulation. ``shortcuts`` (eager only, no transform
     watching): skip the far root when every ray meets the sag branch with the near one (same values).
     """

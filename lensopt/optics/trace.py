@@ -444,7 +444,8 @@ class KernelOptions:
         ratio_refraction: refract with ``refract_ratio_xyz`` (False: ``bend_xyz``, as eager).
         component_major: write the outputs component-major (False: interleaved, as eager).
 
-    The last two are switches for ``benchmarks/trace_kernel_ablation.py`` (each change measured).
+    The last two are switches for an ablation benchmark (each change measured; in git history:
+    benchmarks/trace_kernel_ablation.py).
     """
 
     near_only: tuple[bool, ...]
@@ -455,7 +456,7 @@ class KernelOptions:
 CHUNK_RAYS = 1 << 16
 """Rays per chunk of the eager trace when nothing needs gradients: every eager op writes a full
 array, and on arrays of ≈ 0.5 MB (64 Ki rays, float64) that stays in the CPU caches instead of
-main memory (1.5–2× faster at 1e6 rays, benchmarks/RESULTS.md issue 14; the same numbers bit for bit)."""
+main memory (1.5–2× faster at 1e6 rays, git history of benchmarks/RESULTS.md; the same numbers bit for bit)."""
 
 
 def _chunked(lens: Lens, rays: Rays, pos: Tensor) -> bool:

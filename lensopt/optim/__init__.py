@@ -6,14 +6,14 @@ problem in ``lensopt.design``.
     solves.py             solves applied inside the residual function
     rays.py               the optimization rays
     residuals.py          pure residual terms (S2.2)
-    terms.py              the registry of residual terms
+    terms.py              the residual terms: one static ordered tuple (TERMS) and what they see
     problem.py            Problem: residuals(θ), Jacobian, checks
+    jacobian.py           the LM Jacobian in three forward-mode stages (jacfwd, differential trace, vmap-jvp)
     settings.py           plain frozen settings
     schedule.py           weight schedules
     lm.py                 Levenberg–Marquardt (S2.3.2)
     adam.py               Adam (S2.3.1)
     compiled_jacobian.py  the LM Jacobian compiled (AOT/Inductor)
-    row_jacobian.py       the Jacobian without inactive rows (measured alternative; not used)
     run.py                the driver: phases, glass binding, progress
     report.py             constraint margins of a lens
     gtra.py               generalized transverse ray aberrations (S66–S68)

@@ -18,14 +18,14 @@ Backends:
   version and the source of the library). The first process builds it (capture + export + compile:
   1.5–3 minutes of CPU, the C++ compiler included, for the Cooke and C-mount problems on the 2-core
   development machine); every later process with the same problem loads it in milliseconds, with no
-  capture and no compiler (benchmarks/RESULTS.md, issue 14 session 22). A problem that cannot be keyed (an image
+  capture and no compiler (benchmarks/README.md, optimize). A problem that cannot be keyed (an image
   objective, whose residual function changes with every batch; an object the digest does not know) is
   compiled in process (``inductor``).
 - ``inductor``: the captured graph handed to Inductor in this process (``torch._inductor.compile``); paid
   by every process (a second process was seen lowering the graph again: no hit in Inductor's graph
   cache for graphs with tensor constants).
 - ``dynamo``: ``torch.compile`` of the GraphModule, which first re-traces its 10⁴-line generated Python with
-  Dynamo: more than twice the CPU time of ``inductor`` (benchmarks/RESULTS.md, issue 14 session 21).
+  Dynamo: more than twice the CPU time of ``inductor`` (git history of benchmarks/RESULTS.md).
 - ``graph``: the captured graph run as Python, no compiler (for tests of the capture).
 
 Safety of the capture: ``make_fx`` refuses data-dependent Python control flow on the traced values

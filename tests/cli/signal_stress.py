@@ -12,7 +12,7 @@ Outcomes: ``one_line`` (the exit code of the signal, stderr exactly "interrupted
 ``finished`` (exit 0, the complete table, nothing on stderr: the signal came after the process had
 committed to its exit), anything else is a failure and is kept verbatim.
 
-``python tests/cli/signal_stress.py [REPEATS] [--pre-entry]`` prints the counts (benchmarks/RESULTS.md).
+``python tests/cli/signal_stress.py [REPEATS] [--pre-entry]`` prints the counts (benchmarks/README.md, accuracy).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 moments (tests/cli/signal_stress.py) and must end with 130 / 143 and exactly one line, or — when the
 signal comes after the process committed to its exit — with its normal result (exit 0, complete output).
 
-Before the fix (the counts are in benchmarks/RESULTS.md, issue 17 signals): a SIGINT during torch's import
+Before the fix (the counts are in the git history of benchmarks/RESULTS.md): a SIGINT during torch's import
 printed "interrupted" and still ended with −2 (CPython's unhandled-KeyboardInterrupt flag, tripped by
 ``exec(string)``), and a signal during the interpreter's teardown ended with −2 / −15 and no line.
 """

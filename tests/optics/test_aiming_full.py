@@ -44,7 +44,7 @@ def _stop_misses(steps: int) -> tuple[torch.Tensor, torch.Tensor]:
 
 
 def test_marginal_rays_meet_the_stop_edge_after_three_steps() -> None:
-    # Measured (benchmarks/RESULTS.md): 1 step leaves 3.6e-3 mm at 50°, 2 steps 6e-8 mm, 3 steps 1e-13 mm.
+    # Measured (benchmarks/README.md, trace): 1 step leaves 3.6e-3 mm at 50°, 2 steps 6e-8 mm, 3 steps 1e-13 mm.
     miss, chief = _stop_misses(3)
     assert float(miss.abs().max()) <= 1e-9
     assert float(chief.abs().max()) <= 1e-9

@@ -127,7 +127,7 @@ def test_inscribed_bundle_passes_the_aperture_entirely() -> None:
 def test_factors_match_brute_force_with_full_aiming() -> None:
     # With full aiming the kept set is cut by the stop (radius of the axial beam) and the aperture:
     # y limits exact (aimed marginal ray / aperture edge), x the extent of the aimed ellipse ∩ disc.
-    # The full field only (the most vignetted); benchmarks/pupils_vignetting.py does every field.
+    # The full field only (the most vignetted); benchmarks/trace/pupils_vignetting.py does every field.
     m = _model("extent", "full")
     with torch.no_grad():
         b = trace_bundle(m.lens, m.system, torch.zeros(1, 2, dtype=F64))

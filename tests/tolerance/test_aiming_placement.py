@@ -9,7 +9,7 @@ The stop centre of a placed lens is the stop surface's own vertex; ``aim_chief``
 - a brute-force search: scipy's least_squares (finite differences, no autodiff) over the pupil point
   whose ray meets the stop centre, on a Cooke triplet whose first element is tilted and decentered.
 
-The size of the error that aiming removes is recorded (benchmarks/RESULTS.md, issue 12 wave 2): the
+The size of the error that aiming removes is recorded (benchmarks/README.md, tolerance): the
 unaimed trial traces the nominal pupil through a moved stop, and a y-only aim leaves the x miss.
 """
 

@@ -4,7 +4,7 @@ per level, i.e. 95 % for the five levels together by Bonferroni), and the 1000-t
 100-trial mean ± 3 standard errors. (At 95 % per level, one of five levels falls outside about one
 time in four by chance alone; with seeds 1 and 2 at rings:6 the 90 % level does: 15.088 µm against
 the interval 14.928–15.063 µm.) Slow (1100
-trials); ``make test-slow``. The full study at rings:12 is ``benchmarks/tolerance_cmount.py``."""
+trials); ``make test-slow``. The full study at rings:12 is ``benchmarks/tolerance/tolerance_cmount.py``."""
 
 from __future__ import annotations
 

@@ -1,0 +1,427 @@
+"""Seed Table S15 (spot / raw / restored C-mount lenses, each with its own restoration network) at a
+budget that fits a shared 2-core CPU.
+
+The three rows:
+
+- spot: ``lenses/cmount_4p.json`` (shipped), its network trained by ``lensopt train-irm``;
+- raw: ``lenses/cmount_4p_raw.json`` (shipped), its network trained by ``lensopt train-irm``;
+- restored: ``lensopt optimize`` of a copy of ``specs/cmount_4p_restored.toml`` (joint LM lens step +
+  Adam network step from the spot lens), at the small batch, patch and step count given here.
+
+Fair comparison: the two ``train-irm`` networks get the same number of Adam steps, batch, patch, PSF
+size, fields, pupil sampling, PSF grid, noise, learning rate and schedule as the joint run's network.
+The spot lens JSON carries no ``rgb_weights``; its copy here gets the restored spec's (the spectrum's
+R/G/B split, which does not touch the geometry) so that all three networks restore 3-channel images.
+
+Evaluation: ``lensopt evaluate LENS --irm CKPT --noise 0.005 --json`` (before and after restoration) on
+held-out dead-leaves scenes of a seed used by no training source, and on the colour photographs
+bundled with scikit-image; ESR from ``lensopt trace LENS --json`` (rings:24).
+
+    PYTHONPATH=. python benchmarks/e2e/table_s15.py --steps 500 --batch 4 --patch 64 --control --extra-seeds 1
+    # → out/table_s15/ (lenses, checkpoints, logs) and benchmarks/e2e/results_table_s15.json
+
+The restored run and the two ``train-irm`` runs go as two processes side by side (``--parallel 2``,
+one thread each). ``--skip-main`` re-uses the three main runs of an earlier call in the same ``--work`` (the extra and
+control runs are re-used whenever their checkpoint has reached ``--steps``).
+``--control`` adds a fourth row: the restored lens with a fresh ``train-irm`` network of the same
+budget (is the gain the lens's or the joint training's?).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[2]
+PHOTOS = ["astronaut.png", "chelsea.png", "coffee.png", "rocket.jpg", "motorcycle_left.png",
+          "hubble_deep_field.jpg", "ihc.png", "retina.jpg"]
+EVAL_SEED = 424242  # dead-leaves seed of the held-out scenes: training uses seeds 0 and 1 000 003
+
+
+def _python() -> list[str]:
+    return [sys.executable, "-m", "lensopt"]
+
+
+def write_inputs(work: Path, a: argparse.Namespace) -> dict[str, Path]:
+    """The three start files in ``work``: spot and raw lenses with the restored spec's RGB split and
+    ``[restore]`` section, and the restored spec at this budget."""
+    sys.path.insert(0, str(ROOT))
+    from lensopt.spec import load_spec
+
+    restored = load_spec(ROOT / "specs/cmount_4p_restored.toml")
+    img = restored.optimize.image.model_copy(update={"batch": a.batch, "patch": a.patch, "psf_size": a.psf_size,
+                                                     "validation": a.val_patches})
+    train = restored.restore.train.model_copy(update={
+        "steps": a.steps, "batch": a.batch, "patch": a.patch, "validation_patches": a.val_patches,
+        "checkpoint_every": a.checkpoint_every, "validate_every": a.validate_every})
+    rest = restored.restore.model_copy(update={"train": train})
+    opt = restored.optimize.model_copy(update={"image": img, "steps": a.steps})
+    out = {}
+    spec = restored.model_copy(update={"optimize": opt, "restore": rest})
+    out["restored_start"] = work / "cmount_4p_restored_start.json"
+    out["restored_start"].write_text(spec.model_dump_json(indent=1, exclude_none=True))
+    for seed in a.joint_seeds:  # the same run with other batches, held-out patches and network initialisation
+        o = opt.model_copy(update={"image": img.model_copy(update={"seed": seed})})
+        out[f"restored_start_seed{seed}"] = work / f"cmount_4p_restored_start_seed{seed}.json"
+        out[f"restored_start_seed{seed}"].write_text(
+            restored.model_copy(update={"optimize": o, "restore": rest}).model_dump_json(indent=1, exclude_none=True))
+    for name, path in (("spot", "lenses/cmount_4p.json"), ("raw", "lenses/cmount_4p_raw.json")):
+        lens = load_spec(ROOT / path)
+        spectrum = lens.spectrum.model_copy(update={"rgb_weights": restored.spectrum.rgb_weights})
+        lens = lens.model_copy(update={"spectrum": spectrum, "restore": rest})
+        out[name] = work / f"{name}.json"
+        out[name].write_text(lens.model_dump_json(indent=1, exclude_none=True))
+    return out
+
+
+def _run(cmd: list[str], log: Path) -> subprocess.Popen:
+    env = dict(os.environ, OMP_NUM_THREADS=str(1), PYTHONPATH=str(ROOT))
+    print("$ " + " ".join(cmd), flush=True)
+    return subprocess.Popen(cmd, stdout=log.open("w"), stderr=subprocess.STDOUT, env=env, cwd=ROOT)
+
+
+def _wait(procs: list[tuple[str, subprocess.Popen, float]], times: dict[str, float]) -> None:
+    for name, p, t0 in procs:
+        rc = p.wait()
+        times[name] = time.perf_counter() - t0
+        if rc != 0:
+            raise SystemExit(f"{name} failed (exit {rc}); see its log in the work folder")
+
+
+def _irm_opts(a: argparse.Namespace) -> list[str]:
+    """train-irm options that give the network the joint run's budget and rendering."""
+    return ["--steps", str(a.steps), "--batch", str(a.batch), "--patch", str(a.patch),
+            "--psf-size", str(a.psf_size), "--fields", "9", "--sampling", "rings:8", "--grid", "3x3",
+            "--checkpoint-every", str(a.checkpoint_every), "--validate-every", str(a.validate_every),
+            "--val-patches", str(a.val_patches)]
+
+
+def train(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str, float]:
+    """The joint run and the two train-irm runs; wall seconds of each."""
+    irm_opts = _irm_opts(a)
+    jobs = {
+        "restored": _python() + ["optimize", str(files["restored_start"]), "-o", str(work / "restored.json"),
+                                 "--checkpoint", str(work / "ck_restored"), "--log-dir", str(work / "tb_restored")],
+        "spot": _python() + ["train-irm", str(files["spot"]), "-o", str(work / "ck_spot"),
+                             "--log-dir", str(work / "tb_spot")] + irm_opts,
+        "raw": _python() + ["train-irm", str(files["raw"]), "-o", str(work / "ck_raw"),
+                            "--log-dir", str(work / "tb_raw")] + irm_opts,
+    }
+    for name in jobs:
+        for p in (work / f"ck_{name}", work / f"tb_{name}"):
+            shutil.rmtree(p, ignore_errors=True)
+    times: dict[str, float] = {}
+    if a.parallel >= 2:
+        # The joint step costs about two network steps: the joint run beside spot-then-raw.
+        t0 = time.perf_counter()
+        pr = _run(jobs["restored"], work / "restored.log")
+        ps = _run(jobs["spot"], work / "spot.log")
+        ts = time.perf_counter()
+        rc = ps.wait()
+        times["spot"] = time.perf_counter() - ts
+        if rc != 0:
+            raise SystemExit("spot train-irm failed; see spot.log")
+        tr = time.perf_counter()
+        _wait([("raw", _run(jobs["raw"], work / "raw.log"), tr), ("restored", pr, t0)], times)
+    else:
+        for name, cmd in jobs.items():
+            _wait([(name, _run(cmd, work / f"{name}.log"), time.perf_counter())], times)
+    return times
+
+
+def _finished(ck: Path, steps: int) -> bool:
+    """A checkpoint of a finished run (re-used, not trained again)."""
+    from lensopt.checkpoint import load_checkpoint
+
+    return ck.exists() and load_checkpoint(ck).step == steps
+
+
+def train_extra_seeds(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str, float]:
+    """Networks for the spot and raw lenses again with other seeds (initial weights, scenes, tiles, noise
+    and the train-irm validation patches): how much of a row's score is the draw of one training run."""
+    times: dict[str, float] = {}
+    for seed in a.extra_seeds:
+        for name in ("spot", "raw"):
+            tag = f"{name}_seed{seed}"
+            if _finished(work / f"ck_{tag}", a.steps):
+                continue
+            cmd = _python() + ["train-irm", str(files[name]), "-o", str(work / f"ck_{tag}"), "--log-dir",
+                               str(work / f"tb_{tag}"), "--seed", str(seed)] + _irm_opts(a)
+            for p in (work / f"ck_{tag}", work / f"tb_{tag}"):
+                shutil.rmtree(p, ignore_errors=True)
+            _wait([(tag, _run(cmd, work / f"{tag}.log"), time.perf_counter())], times)
+    return times
+
+
+def train_joint_seeds(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str, float]:
+    """The joint run again with other seeds (``[optimize.image] seed`` and ``--seed``)."""
+    times: dict[str, float] = {}
+    for seed in a.joint_seeds:
+        tag = f"restored_seed{seed}"
+        if _finished(work / f"ck_{tag}", a.steps):
+            continue
+        for p in (work / f"ck_{tag}", work / f"tb_{tag}"):
+            shutil.rmtree(p, ignore_errors=True)
+        cmd = _python() + ["optimize", str(files[f"restored_start_seed{seed}"]), "-o", str(work / f"{tag}.json"),
+                           "--checkpoint", str(work / f"ck_{tag}"), "--log-dir", str(work / f"tb_{tag}"),
+                           "--seed", str(seed)]
+        _wait([(tag, _run(cmd, work / f"{tag}.log"), time.perf_counter())], times)
+    return times
+
+
+def train_control(work: Path, a: argparse.Namespace) -> float:
+    """A fourth row: a fresh network trained by train-irm (same budget) for the lens the joint run wrote,
+    to tell the lens's share of the restored row's gain from the joint training's."""
+    lens = work / "restored.json"
+    if _finished(work / "ck_restored_irm", a.steps):
+        return 0.0
+    cmd = _python() + ["train-irm", str(lens), "-o", str(work / "ck_restored_irm"), "--log-dir",
+                       str(work / "tb_restored_irm")] + _irm_opts(a)
+    for p in (work / "ck_restored_irm", work / "tb_restored_irm"):
+        shutil.rmtree(p, ignore_errors=True)
+    times: dict[str, float] = {}
+    _wait([("restored_irm", _run(cmd, work / "restored_irm.log"), time.perf_counter())], times)
+    return times["restored_irm"]
+
+
+POLISH = ROOT / "specs" / "stages" / "cmount_4p_raw_polish.toml"
+
+
+def polish(work: Path, a: argparse.Namespace) -> dict[str, float]:
+    """A fifth row: the joint run's lens made to meet the 2 % distortion requirement by the raw lens's own
+    polish stage (the ``[optimize]`` of ``specs/stages/cmount_4p_raw_polish.toml``: 4 LM steps on the raw
+    image loss with the distortion weight 1000 and ``max_percent = 1.95``), then a fresh ``train-irm``
+    network of the same budget for the polished lens (as ``--control`` does for the unpolished one)."""
+    import tomllib
+
+    from lensopt.spec import load_spec
+    from lensopt.spec.optim import OptimizeSpec
+
+    times: dict[str, float] = {}
+    lens_out = work / "restored_polished.json"
+    if not lens_out.exists():
+        opt = OptimizeSpec.model_validate(tomllib.loads(POLISH.read_text())["optimize"])
+        weight, max_percent = a.polish_distortion
+        dist = opt.constraints.distortion.model_copy(update={"weight": weight, "max_percent": max_percent})
+        opt = opt.model_copy(update={"steps": a.polish_steps,
+                                     "constraints": opt.constraints.model_copy(update={"distortion": dist})})
+        start = work / "restored_polish_start.json"
+        start.write_text(load_spec(work / "restored.json").model_copy(update={"optimize": opt})
+                         .model_dump_json(indent=1, exclude_none=True))
+        cmd = _python() + ["optimize", str(start), "-o", str(lens_out), "--seed", "0"]
+        _wait([("restored_polish", _run(cmd, work / "restored_polish.log"), time.perf_counter())], times)
+    if not _finished(work / "ck_restored_polished", a.steps):
+        for p in (work / "ck_restored_polished", work / "tb_restored_polished"):
+            shutil.rmtree(p, ignore_errors=True)
+        cmd = _python() + ["train-irm", str(lens_out), "-o", str(work / "ck_restored_polished"), "--log-dir",
+                           str(work / "tb_restored_polished")] + _irm_opts(a)
+        _wait([("restored_polished_irm", _run(cmd, work / "restored_polished_irm.log"), time.perf_counter())],
+              times)
+    return times
+
+
+def _json_out(cmd: list[str]) -> dict[str, Any]:
+    env = dict(os.environ, OMP_NUM_THREADS=str(1), PYTHONPATH=str(ROOT))
+    print("$ " + " ".join(cmd), flush=True)
+    r = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT)
+    if r.returncode != 0:
+        raise SystemExit(f"failed: {' '.join(cmd)}\n{r.stderr[-2000:]}")
+    return json.loads(r.stdout)
+
+
+def _brief(e: dict[str, Any]) -> dict[str, Any]:
+    return {"psnr_db": e["psnr_db"], "ssim": e["ssim"], "count": e["count"], "images": e["images"],
+            "rings_psnr_db": [g["psnr_db"] for g in e["rings"]], "space": e["space"],
+            "items_psnr_db": [i["psnr_db"] for i in e["items"]], "items_ssim": [i["ssim"] for i in e["items"]]}
+
+
+def paired(rows: dict[str, Any], key: str, when: str, a: str, b: str) -> dict[str, float]:
+    """Mean per-scene PSNR difference b − a (same scenes, same sensor tiles, same noise) and its
+    standard error over the scenes."""
+    import statistics
+
+    d = [y - x for x, y in zip(rows[a][key][when]["items_psnr_db"], rows[b][key][when]["items_psnr_db"], strict=True)]
+    se = statistics.stdev(d) / len(d) ** 0.5 if len(d) > 1 else float("nan")
+    return {"mean_db": statistics.fmean(d), "stderr_db": se, "scenes": len(d), "wins": sum(x > 0 for x in d)}
+
+
+def requirements(lens: Path) -> dict[str, Any]:
+    """The S6.1 requirements measured on every ray of a dense pupil grid plus the rim (as
+    tests/test_lenses.py does for the shipped C-mount lenses): glass 1–5 mm, air ≥ 0.25 mm, image
+    clearance ≥ 20 mm, angles ≤ 60°, |distortion| ≤ 2 %, EFL 28 mm, f/2."""
+    import math
+
+    import torch
+
+    from lensopt.analysis.report import trace_report
+    from lensopt.optics.bundle import trace_bundle
+    from lensopt.optics.sampling import PupilSampling
+    from lensopt.spec import build, load_spec
+
+    model = build(load_spec(lens))
+    rep = trace_report(model, PupilSampling.parse("rings:24"))
+    grid = PupilSampling.parse("grid:41").points(dtype=torch.float64)
+    phi = torch.linspace(0, 2 * math.pi, 65, dtype=torch.float64)[:-1]
+    b = trace_bundle(model.lens, model.system, torch.cat([grid, torch.stack([phi.cos(), phi.sin()], -1)]),
+                     record=True)
+    z = [h.pos[..., 2] for h in b.result.hits] + [b.result.pos[..., 2]]
+    glass, air, image = [], [], None
+    for i, surf in enumerate(model.spec.surfaces):
+        tz = z[i + 1] - z[i]
+        if i == len(model.spec.surfaces) - 1:
+            image = float(tz.min())
+        elif surf.material == "air":
+            air.append(float(tz.min()))
+        else:
+            glass += [float(tz.min()), float(tz.max())]
+    cos2 = torch.stack([torch.stack([h.cos2_in, h.cos2_out]) for h in b.result.hits])
+    out = {"all_rays_valid": bool(b.result.valid.all()), "glass_min_mm": min(glass), "glass_max_mm": max(glass),
+           "air_min_mm": min(air), "image_clearance_mm": image,
+           "max_angle_deg": math.degrees(math.acos(math.sqrt(float(cos2.min())))),
+           "max_abs_distortion_percent": max(abs(f["distortion_percent"]) for f in rep["fields"]),
+           "efl_mm": rep["first_order"]["efl"], "fnumber": rep["first_order"]["fnumber"]}
+    out["met"] = (out["all_rays_valid"] and out["glass_min_mm"] >= 1.0 and out["glass_max_mm"] <= 5.0
+                  and out["air_min_mm"] >= 0.25 and image >= 20.0 and out["max_angle_deg"] <= 60.0
+                  and out["max_abs_distortion_percent"] <= 2.0 and abs(out["efl_mm"] / 28.0 - 1) <= 1e-3)
+    return out
+
+
+def evaluate(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str, Any]:
+    import skimage
+
+    photos = work / "photos"
+    photos.mkdir(exist_ok=True)
+    for name in PHOTOS:
+        shutil.copy(Path(skimage.__file__).parent / "data" / name, photos / name)
+    rows: dict[str, Any] = {}
+    todo = [("spot", files["spot"], "ck_spot"), ("raw", files["raw"], "ck_raw"),
+            ("restored", work / "restored.json", "ck_restored")]
+    if (work / "ck_restored_irm").exists():
+        todo.append(("restored_lens_irm", work / "restored.json", "ck_restored_irm"))
+    if (work / "ck_restored_polished").exists():
+        todo.append(("restored_polished", work / "restored_polished.json", "ck_restored_polished"))
+    for seed in a.joint_seeds:
+        if (work / f"ck_restored_seed{seed}").exists():
+            todo.append((f"restored_seed{seed}", work / f"restored_seed{seed}.json", f"ck_restored_seed{seed}"))
+    for seed in a.extra_seeds:
+        for name in ("spot", "raw"):
+            if (work / f"ck_{name}_seed{seed}").exists():
+                todo.append((f"{name}_seed{seed}", files[name], f"ck_{name}_seed{seed}"))
+    for name, lens, ck in todo:
+        if name in a.reused_rows:
+            rows[name] = a.reused_rows[name]
+            continue
+        row: dict[str, Any] = {"lens": str(lens.relative_to(ROOT) if lens.is_relative_to(ROOT) else lens)}
+        tr = _json_out(_python() + ["trace", str(lens), "--json"])
+        row["esr_um"] = tr["effective_spot_radius_um"]
+        row["requirements"] = requirements(lens)
+        for key, extra in (("dead_leaves", ["--count", str(a.eval_count), "--seed", str(EVAL_SEED)]),
+                           ("photos", ["--images", str(photos), "--count", "8", "--seed", "0"])):
+            e = _json_out(_python() + ["evaluate", str(lens), "--irm", str(work / ck), "--noise", "0.005",
+                                       "--json"] + extra)
+            row[key] = {"before": _brief(e), "after": _brief(e["after_restoration"]),
+                        "gain_db": e["after_restoration"]["psnr_db"] - e["psnr_db"]}
+        rows[name] = row
+    return rows
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--steps", type=int, default=500, help="network Adam steps (and joint steps) per row")
+    p.add_argument("--batch", type=int, default=4)
+    p.add_argument("--patch", type=int, default=64)
+    p.add_argument("--psf-size", type=int, default=49, help="as specs/cmount_4p_restored.toml")
+    p.add_argument("--val-patches", type=int, default=8)
+    p.add_argument("--validate-every", type=int, default=50)
+    p.add_argument("--checkpoint-every", type=int, default=25)
+    p.add_argument("--eval-count", type=int, default=50, help="held-out dead-leaves scenes")
+    p.add_argument("--parallel", type=int, default=2, choices=(1, 2))
+    p.add_argument("--work", type=Path, default=ROOT / "out" / "table_s15")
+    p.add_argument("--skip-main", action="store_true",
+                   help="skip the three main training runs (use those in --work)")
+    p.add_argument("--no-evaluate", action="store_true", help="train only")
+    p.add_argument("--extra-seeds", type=int, nargs="*", default=[],
+                   help="also train the spot and raw networks with these seeds (more rows)")
+    p.add_argument("--joint-seeds", type=int, nargs="*", default=[],
+                   help="also run the joint optimization with these seeds (batches, held-out set, network init)")
+    p.add_argument("--control", action="store_true",
+                   help="also train a fresh train-irm network for the restored lens (a fourth row)")
+    p.add_argument("--polish", action="store_true",
+                   help="also polish the restored lens to its distortion limit, with a fresh network (a fifth row)")
+    p.add_argument("--polish-steps", type=int, default=8, help="LM steps of the polish (--polish)")
+    p.add_argument("--polish-distortion", type=float, nargs=2, default=[10000.0, 1.9],
+                   metavar=("WEIGHT", "MAX_PERCENT"), help="the distortion constraint of the polish")
+    p.add_argument("--reuse-rows", action="store_true",
+                   help="keep the rows already in --out (same --work) and evaluate only the missing ones")
+    p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "e2e" / "results_table_s15.json")
+    a = p.parse_args()
+    a.reused_rows = json.loads(a.out.read_text())["rows"] if a.reuse_rows and a.out.exists() else {}
+    a.work.mkdir(parents=True, exist_ok=True)
+    files = write_inputs(a.work, a)
+    t0 = time.perf_counter()
+    times = {} if a.skip_main else train(a.work, files, a)
+    t_train = time.perf_counter() - t0
+    if a.control:
+        times["restored_irm"] = train_control(a.work, a)
+    times.update(train_extra_seeds(a.work, files, a))
+    times.update(train_joint_seeds(a.work, files, a))
+    if a.polish:
+        times.update(polish(a.work, a))
+    if a.no_evaluate:
+        return
+    rows = evaluate(a.work, files, a)
+    cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
+    result = {
+        "budget": {"steps": a.steps, "batch": a.batch, "patch": a.patch, "psf_size": a.psf_size, "fields": 9,
+                   "sampling": "rings:8", "grid": [3, 3], "noise": 0.005, "val_patches": a.val_patches,
+                   "parallel": a.parallel, "threads_per_process": 1},
+        "train_wall_s": times, "train_total_wall_s": t_train if not a.skip_main else None,
+        "children_cpu_s": cpu.ru_utime + cpu.ru_stime, "load_avg_at_end": os.getloadavg(),
+        "evaluation": {"noise": 0.005, "dead_leaves_seed": EVAL_SEED, "dead_leaves_count": a.eval_count,
+                       "photos": PHOTOS},
+        "rows": rows,
+        "paired_differences": {f"{key}/{when}/{y}-{x}": paired(rows, key, when, x, y)
+                               for key in ("dead_leaves", "photos") for when in ("before", "after")
+                               for x, y in (("spot", "raw"), ("raw", "restored"), ("spot", "restored"),
+                                            ("spot", "restored_lens_irm"), ("restored_lens_irm", "restored"),
+                                            ("spot", "restored_polished"), ("raw", "restored_polished"))
+                                 + tuple((n, f"{n}_seed{s}") for s in a.extra_seeds for n in ("spot", "raw"))
+                                 + tuple(("restored", f"restored_seed{s}") for s in a.joint_seeds)
+                                 + tuple((f"raw_seed{s}", f"restored_seed{s}") for s in a.joint_seeds)
+                               if x in rows and y in rows},
+    }
+    from lensopt.checkpoint import load_checkpoint
+    from lensopt.files import write_text_atomic
+
+    for name in (["restored", "spot", "raw", "restored_irm", "restored_polished"]
+                 + [f"{n}_seed{s}" for s in a.extra_seeds for n in ("spot", "raw")]
+                 + [f"restored_seed{s}" for s in a.joint_seeds]):
+        if not (a.work / f"ck_{name}").exists():
+            continue
+        ck = load_checkpoint(a.work / f"ck_{name}")
+        hist = ck.meta.get("history") or []
+        result.setdefault("histories", {})[name] = {
+            "step": ck.step, "sum_step_wall_s": sum(h.get("wall_s", 0.0) for h in hist),
+            "validation": [{k: h[k] for k in ("step", "psnr_raw", "psnr_restored") if k in h}
+                           for h in hist if "psnr_restored" in h],
+            "history_every_10th_step": [h for h in hist if h["step"] % 10 == 0]}
+    write_text_atomic(a.out, json.dumps(result, indent=1) + "\n")
+    print("| lens | ESR µm | dead leaves before → after (gain) | photos before → after (gain) |")
+    print("|---|---:|---|---|")
+    for name, r in rows.items():
+        d, f = r["dead_leaves"], r["photos"]
+        print(f"| {name} | {r['esr_um']:.2f} | {d['before']['psnr_db']:.2f} → {d['after']['psnr_db']:.2f} "
+              f"({d['gain_db']:+.2f}) | {f['before']['psnr_db']:.2f} → {f['after']['psnr_db']:.2f} "
+              f"({f['gain_db']:+.2f}) |")
+
+
+if __name__ == "__main__":
+    main()
