@@ -25,7 +25,6 @@ Every command of the app has an executed example in docs/commands.md (``test_eve
 from __future__ import annotations
 
 import glob
-import importlib.metadata
 import re
 import shlex
 import shutil
@@ -127,8 +126,11 @@ def workdir(workdirs: dict[Path, Path], factory: pytest.TempPathFactory, page: P
 
 
 def app() -> typer.Typer:
-    (entry,) = importlib.metadata.entry_points(group="console_scripts", name="lensopt")
-    return entry.load()
+    """The typer app the ``lensopt`` console script runs (``lensopt.__main__.main`` runs it after
+    installing the signal handlers, which an in-process test leaves alone)."""
+    from lensopt.cli.app import app as typer_app
+
+    return typer_app
 
 
 def parse(text: str, cwd: Path) -> tuple[dict[str, str], list[str], Path | None, int]:
