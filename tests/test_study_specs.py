@@ -70,7 +70,12 @@ def test_a_study_has_the_seeds_variables(study: tuple[str, Problem]) -> None:
         assert (count["thickness"], count["curvature"], count["asphere"]) == (11, 9, 60)
         assert p.num_glasses == 5 and p.space is not None and p.space.dims == 2
     elif name.startswith("telephoto_5p1"):
-        assert count["phase"] == 4 and p.num_variables == 94
+        # The 5P's 90, plus the diffractive plane's 4 phase coefficients and its place in the E4–E5
+        # airspace (S4.2.2: the phase on its own plane in air between E4 and E5, as the published design).
+        assert count["phase"] == 4 and count["thickness"] == 12 and p.num_variables == 95
+        doe = [s for s, shape in enumerate(p.setup.lens.shapes) if shape.diffractive]
+        assert len(doe) == 1 and p.setup.lens.shapes[doe[0]].kind == "plane"
+        assert p.spec.surfaces[doe[0] - 1].is_air and p.spec.surfaces[doe[0]].is_air  # in air on both sides
     else:
         # S5.1.4: 16 spacings (of 17), 15 curvatures (of 16); all 8 glasses vary with ΔPgF (8 × 3).
         assert (count["thickness"], count["curvature"], p.num_glasses) == (16, 15, 8)
