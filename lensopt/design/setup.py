@@ -24,7 +24,8 @@ __all__ = ["SpecProblem", "build_problem", "problem_setup", "settings_of", "reso
 
 #: Which plain dataclass each pydantic settings model converts to (``settings_of``).
 _KINDS: dict[type, type] = {
-    so.OptimizeSpec: st.OptimizeSettings, so.TraSpec: st.TraSettings, so.GapBoundSpec: st.GapBound,
+    so.OptimizeSpec: st.OptimizeSettings, so.TraSpec: st.TraSettings, so.WavefrontSpec: st.WavefrontSettings,
+    so.GapBoundSpec: st.GapBound,
     so.SpanBoundSpec: st.SpanBound, so.RayPathSpec: st.RayPathSettings, so.RayAngleSpec: st.RayAngleSettings,
     so.SurfaceNormalSpec: st.SurfaceNormalSettings, so.DistortionSpec: st.DistortionSettings,
     so.IlluminationSpec: st.IlluminationSettings, so.GlassMeshSpec: st.GlassMeshSettings,

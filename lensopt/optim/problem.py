@@ -20,6 +20,7 @@ import torch
 from torch import Tensor
 
 from lensopt.analysis.spot import spot_stats
+from lensopt.analysis.wavefront import map_grid
 from lensopt.errors import LensoptError, SpecError
 from lensopt.imaging.camera import Camera
 from lensopt.materials import Material, design_catalog
@@ -173,10 +174,14 @@ class Problem:
             self.image = ImageObjective(setup.camera, self.opt.image or ImageSettings(), mode=mode,
                                         dtype=image_dtype)
         self._shape_memo: tuple[Tensor, PupilShape] | None = None
+        wf_pupil = None
+        if self.opt.wavefront is not None:
+            pts, inside = map_grid(self.opt.wavefront.n, dtype=dtype)
+            wf_pupil = pts[inside].to(self.device)
         self.term_setup = TermSetup(
             self.opt, self.objective, self.system, self.field_weights, self.num_glasses, tuple(self.interfaces),
             tuple(s for s in self.interfaces if not self.surfaces[s].plane), tuple(self.path_spans),
-            self.failure_penalty, self.gap_bounds, self.param.glass_g, self.space, self.mesh, self.image)
+            self.failure_penalty, self.gap_bounds, self.param.glass_g, self.space, self.mesh, self.image, wf_pupil)
         self.slices = self._layout()
         self.size = max((sl.stop for sl in self.slices.values()), default=0)
 

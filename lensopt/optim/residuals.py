@@ -30,6 +30,7 @@ __all__ = [
     "relative_illumination",
     "failure_margin",
     "failures",
+    "wavefront",
 ]
 
 BIG = 1e9
@@ -194,3 +195,22 @@ def failures(bundle: Bundle, lens: Lens, penalty_mm: float) -> Tensor:
         return bad.reshape(-1)
     margin = failure_margin(bundle, lens)
     return (bad * penalty_mm * (1.0 + margin)).reshape(-1) / math.sqrt(res.status.numel())
+
+
+def wavefront(lens: Lens, system: System, pupil: Tensor, wavelength_weights: Tensor, field_weights: Tensor,
+              *, tilt: bool = True) -> Tensor:
+    """(F·W·P,) wavefront error residuals, waves: every ray's W (``analysis.wavefront``: the real chief
+    ray's reference sphere) minus the least-squares piston (and tilt) of its field and wavelength, weighted
+    by sqrt(f_h/Σf · W_w/ΣW / P_h,w) with P_h,w the valid rays, so that ‖ℓ‖² = Σ_h,w f̂_h Ŵ_w RMS_h,w²:
+    the weighted mean square RMS wavefront error (as ‖ℓ_TRA‖² is the ESR²). ``pupil``: (P, 2) points
+    (equal-area, e.g. ``analysis.wavefront.map_grid``'s inside the circle); failed rays give 0."""
+    from lensopt.analysis.wavefront import remove_tilt
+    from lensopt.analysis.wavefront import wavefront as wavefront_of
+
+    wf = wavefront_of(lens, system, pupil)
+    resid = remove_tilt(wf.pupil, wf.opd, wf.valid, tilt=tilt)
+    count = wf.valid.to(resid.dtype).sum(-1, keepdim=True).clamp_min(1.0)
+    ww = wavelength_weights.to(resid.dtype) / wavelength_weights.sum()
+    fw = field_weights.to(resid.dtype) / field_weights.sum()
+    scale = torch.sqrt(fw[:, None, None] * ww[None, :, None] / count)
+    return (resid * scale).reshape(-1)

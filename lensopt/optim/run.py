@@ -184,7 +184,8 @@ def run_problem(problem: Problem, *, optimizer: str | None = None, steps: int | 
     scale0 = problem.row_scale(0.0)
     result = OptimizeResult(spec=None, problem=problem, theta=problem.theta0, steps=0, stop_reason="",
                             interrupted=False, bound=[],
-                            start_esr_um=1e3 * problem.esr_mm(start.residuals),
+                            start_esr_um=1e3 * (problem.esr_mm(start.residuals) if "tra" in problem.slices
+                                                else problem.spot_esr_mm(problem.theta0)),
                             start_merit=0.5 * float(((scale0 * start.residuals) ** 2).sum()))
     if problem.image is not None:
         result.start_esr_um = 1e3 * problem.spot_esr_mm(problem.theta0)
@@ -211,7 +212,8 @@ def run_problem(problem: Problem, *, optimizer: str | None = None, steps: int | 
                 esr = 1e3 * problem.spot_esr_mm(state.theta)
                 result.image_history.append((k, image_loss))
             else:
-                esr = 1e3 * problem.esr_mm(r) if r is not None else float("nan")
+                esr = float("nan") if r is None else 1e3 * (problem.esr_mm(r) if "tra" in problem.slices
+                                                              else problem.spot_esr_mm(state.theta))
             elapsed = time.perf_counter() - t0
             result.history.append((k, elapsed, info.merit, esr))
             if callback is not None:

@@ -42,6 +42,17 @@ class TraSettings:
 
 
 @dataclass(frozen=True)
+class WavefrontSettings:
+    """RMS wavefront error (``analysis.wavefront``: the real chief ray's reference sphere, piston and
+    tilt removed) per field and wavelength as residuals, on an ``n`` × ``n`` pupil grid."""
+
+    weight: float = 1.0
+    schedule: Knots | None = None
+    n: int = 12
+    tilt: bool = True
+
+
+@dataclass(frozen=True)
 class GapBound:
     """Ray-path bounds (mm) of the gap after surface ``gap``."""
 
@@ -218,6 +229,7 @@ class OptimizeSettings:
     objective: str | None = None
     image: ImageSettings | None = None
     tra: TraSettings = field(default_factory=TraSettings)
+    wavefront: WavefrontSettings | None = None
     constraints: ConstraintSettings = field(default_factory=ConstraintSettings)
     lm: LMSettings = field(default_factory=LMSettings)
     adam: AdamSettings = field(default_factory=AdamSettings)

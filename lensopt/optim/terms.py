@@ -51,6 +51,7 @@ class TermSetup:
         glass_g: θ ↦ (G, d) whitened glass coordinates.
         space, mesh: the glass space and its mesh (None without glass variables or the mesh term).
         image: the image objective (objective ``raw``), or None.
+        wavefront_pupil: (P, 2) the wavefront term's pupil points (``[optimize.wavefront]``), or None.
     """
 
     settings: OptimizeSettings
@@ -67,6 +68,7 @@ class TermSetup:
     space: GlassSpace | None = None
     mesh: GlassMesh | None = None
     image: ImageObjective | None = None
+    wavefront_pupil: Tensor | None = None
 
 
 @dataclass(frozen=True)
@@ -151,9 +153,14 @@ def _nothing(bundle: Bundle) -> Collection[str]:
 
 TERMS: tuple[Term, ...] = (
     Term("tra", "transverse ray aberrations about the field centroids, ‖ℓ‖ = ESR (S37–S39)",
-         lambda s: s.settings.tra.weight if s.objective == "spot" else None,
+         lambda s: s.settings.tra.weight if s.objective == "spot" and s.settings.tra.weight > 0 else None,
          lambda c: res.tra(c.spot, c.stats, c.setup.system.wavelength_weights, c.setup.field_weights),
          lambda s: s.settings.tra, _nothing),
+    Term("wavefront", "RMS wavefront error per field and wavelength, waves, piston and tilt removed",
+         lambda s: None if s.settings.wavefront is None else s.settings.wavefront.weight,
+         lambda c: res.wavefront(c.lens, c.setup.system, c.setup.wavefront_pupil, c.setup.system.wavelength_weights,
+                                 c.setup.field_weights, tilt=c.setup.settings.wavefront.tilt),
+         lambda s: s.settings.wavefront, _nothing),
     Term("gtra", "generalized transverse ray aberrations of the image loss (S66–S68)", _image_weight("gtra"),
          lambda c: c.setup.image.gtra(c.lens)),
     Term("image_loss", "√(2 L) of the image loss (scalar, for Adam)", _image_weight("scalar"),

@@ -29,6 +29,7 @@ __all__ = [
     "LMSpec",
     "AdamSpec",
     "ImageSpec",
+    "WavefrontSpec",
     "OptimizeSpec",
 ]
 
@@ -102,6 +103,17 @@ class _Weighted(_Model):
 
 class TraSpec(_Weighted):
     """Transverse ray aberrations (S37–S39), wavelength- and field-weighted so that ‖ℓ_TRA‖ = ESR."""
+
+
+class WavefrontSpec(_Weighted):
+    """RMS wavefront error per field and wavelength as residuals (waves; the real chief ray's reference
+    sphere, piston and tilt removed; ``analysis.wavefront``), beside the TRA or alone (``tra.weight =
+    0``): the merit for lenses near the diffraction limit. ``n``: the rays, an n × n grid over the pupil
+    (the points inside the circle); ``tilt``: remove tilt as well as piston (a tilt is a shift of the
+    image, which the spot centroid and distortion already describe)."""
+
+    n: int = Field(default=12, ge=2, le=64)
+    tilt: bool = True
 
 
 class GapBoundSpec(_Model):
@@ -331,6 +343,8 @@ class OptimizeSpec(_Model):
             ``image``) or ``restored`` (MSE after the restoration network of ``[restore]``, lens and network
             optimized jointly, S3.3; LM only).
         image: ``[optimize.image]``, the rendering of training batches for image objectives.
+        tra: ``[optimize.tra]``, the spot-size term (``weight = 0``: off).
+        wavefront: ``[optimize.wavefront]``, the RMS wavefront error term (absent: off).
     """
 
     alpha: float | None = Field(default=None, gt=0)
@@ -347,6 +361,7 @@ class OptimizeSpec(_Model):
     image: ImageSpec | None = None
     solves: list[Annotated[SolveSpec, Field()]] = Field(default_factory=list)
     tra: TraSpec = Field(default_factory=TraSpec)
+    wavefront: WavefrontSpec | None = None
     constraints: ConstraintsSpec = Field(default_factory=ConstraintsSpec)
     lm: LMSpec = Field(default_factory=LMSpec)
     adam: AdamSpec = Field(default_factory=AdamSpec)
@@ -375,7 +390,10 @@ class OptimizeSpec(_Model):
         cons = self.constraints
         groups = {name: settled(getattr(cons, name)) for name in type(cons).model_fields
                   if isinstance(getattr(cons, name), _Weighted)}
-        return self.model_copy(update={"tra": settled(self.tra), "constraints": cons.model_copy(update=groups)})
+        update = {"tra": settled(self.tra), "constraints": cons.model_copy(update=groups)}
+        if self.wavefront is not None:
+            update["wavefront"] = settled(self.wavefront)
+        return self.model_copy(update=update)
 
     @model_validator(mode="after")
     def _one_solve_per_kind(self) -> OptimizeSpec:
