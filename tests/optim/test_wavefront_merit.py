@@ -11,7 +11,7 @@ from pathlib import Path
 import torch
 
 from lensopt.analysis.wavefront import map_grid, rms_wavefront_error
-from lensopt.design import build_problem, optimize
+from lensopt.design import build_problem
 from lensopt.optim.run import make_optimizer
 from lensopt.spec import parse_spec
 
