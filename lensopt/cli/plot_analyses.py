@@ -43,6 +43,9 @@ MethodOpt = Annotated[str, typer.Option("--method", help="MTF method: heuristic 
 FrequenciesOpt = Annotated[str | None, typer.Option(
     "--frequencies", help="Spatial frequencies, cycles/mm, comma-separated (default: a quarter, half and all of "
     "the sensor's Nyquist frequency, without a sensor a tenth, quarter and half of the diffraction cutoff).")]
+FocusFrequenciesOpt = Annotated[str | None, typer.Option(
+    "--frequencies", help="Spatial frequencies, cycles/mm, comma-separated, one panel each (default: half the "
+    "sensor's Nyquist frequency, without a sensor a quarter of the diffraction cutoff).")]
 
 
 def _numbers(text: str, option: str, what: str) -> list[float]:
@@ -325,7 +328,7 @@ def plot_mtf_field_cmd(lens: LensArg, output: OutOpt, frequencies: FrequenciesOp
 @commands.command("through-focus", short_help="MTF through focus at a few fields.")
 @handle_errors
 def plot_through_focus_cmd(
-    lens: LensArg, output: OutOpt, frequencies: FrequenciesOpt = None, field: FieldOpt = None,
+    lens: LensArg, output: OutOpt, frequencies: FocusFrequenciesOpt = None, field: FieldOpt = None,
     focus_range: Annotated[float | None, typer.Option(
         "--focus-range", help="Half-width of the focus sweep, µm (default: 4 × the diffraction depth of focus "
         "2λN²).")] = None,
@@ -333,7 +336,7 @@ def plot_through_focus_cmd(
     method: MethodOpt = "heuristic", sampling: SamplingOpt = "rings:32", dpi: DpiOpt = 150,
 ) -> None:
     """Tangential and sagittal MTF (polychromatic) against the image-surface position, one panel per
-    frequency (default: half the sensor's Nyquist frequency, or a quarter of the cutoff), one colour per field."""
+    frequency, one colour per field, the best focus of each curve marked."""
     import torch
 
     from lensopt.analysis.mtf_field import through_focus_mtf

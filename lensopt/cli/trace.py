@@ -49,7 +49,7 @@ def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None,
               "seidel).")] = False,
           zernike: Annotated[str, typer.Option("--zernike", help="Zernike ordering of --wavefront: fringe | noll | "
                                                "ansi.")] = "fringe",
-          pupil_grid: Annotated[int, typer.Option("--pupil-grid", min=4, max=512,
+          pupil_grid: Annotated[int, typer.Option("--pupil-grid", min=4, max=512, metavar="N",
                                                   help="Pupil grid N×N of --wavefront.")] = 64,
           wide: Annotated[bool, typer.Option("--wide", help="--wavefront tables for every wavelength (default: "
                                              "the reference wavelength).")] = False) -> None:
