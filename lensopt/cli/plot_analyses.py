@@ -175,7 +175,7 @@ def plot_wavefront_cmd(lens: LensArg, output: OutOpt, field: FieldOpt = None,
     import torch
 
     from lensopt.analysis.strehl import strehl
-    from lensopt.analysis.wavefront import WavefrontMap, wavefront_stats
+    from lensopt.analysis.wavefront import WavefrontMap, map_grid, wavefront_stats
     from lensopt.analysis.zernike import ORDERINGS, fit_zernike, zernike_indices
     from lensopt.plot.style import save_figure
     from lensopt.plot.wavefront import wavefront_figure
@@ -186,6 +186,10 @@ def plot_wavefront_cmd(lens: LensArg, output: OutOpt, field: FieldOpt = None,
     if zernike == "fringe" and terms > 37:
         raise LensoptError("the Fringe set has 37 terms (use noll or ansi for more)", path="--terms", got=terms)
     zernike_indices(zernike, terms)
+    inside = int(map_grid(samples, dtype=torch.float64)[1].sum())
+    if terms > inside:
+        raise LensoptError(f"more terms than the {inside} pupil samples of --samples {samples}; raise --samples",
+                           path="--terms", got=terms)
     model = load_model(lens)
     rel = _fields(model, field)
     picked = _wavelengths(model, wavelength, one=True)

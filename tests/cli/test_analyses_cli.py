@@ -201,6 +201,7 @@ BAD_PLOT = [
     (["encircled", "--wavelength", "700"], "--wavelength: not a wavelength of the spec"),
     (["wavefront", "--zernike", "zemax"], "--zernike: must be one of fringe, noll, ansi"),
     (["wavefront", "--terms", "40"], "--terms: the Fringe set has 37 terms"),
+    (["wavefront", "--samples", "8", "--zernike", "noll", "--terms", "60"], "--terms: more terms than the 52 pupil"),
     (["encircled", "--method", "fft"], "--method: must be geometric or diffraction"),
     (["encircled", "--center", "peak"], "--center: must be one of centroid, chief"),
     (["mtf-field", "--method", "fft"], "--method: must be one of heuristic, geometric, reference"),
