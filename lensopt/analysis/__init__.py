@@ -24,5 +24,6 @@
     layout.py           geometry and meridional ray paths of a 2D layout drawing
     requirements.py     a lens held to a table of requirements (Tables S8, S12)
     report.py           plain-data reports: trace_report, ray_report, mtf_report (``lensopt trace``/``ray``)
+    wavefront_report.py plain-data wavefront (RMS, P-V, Strehl, Zernike) and Seidel reports (``trace --wavefront``)
     fft_size.py         5-smooth FFT lengths
 """

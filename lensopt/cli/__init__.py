@@ -5,8 +5,10 @@
     common.py     consoles, option types and their parsing, --device/--backend, load_model, error
                   rendering (handle_errors, LensoptGroup), print_json, check_output
     signals.py    Ctrl-C / SIGTERM: exit codes 130 / 143 with one line, in every window of the process
-    trace.py      trace, ray
+    trace.py      trace, ray (``trace_analyses.py``: the tables of trace --wavefront / --seidel)
     plot.py       plot layout | fans | spots | psf | field | regions | mtf
+    plot_analyses.py  plot opd | wavefront | field-curves | focal-shift | encircled | mtf-field | through-focus
+                  (appended to the plot group by ``app.py``)
     formats.py    import-codev, export-codev, import-zemax, export-zemax
     simulate.py   simulate, evaluate
     optimize.py   optimize (live progress, summary)
@@ -18,5 +20,6 @@
     warmup.py     warmup
 
 Command modules import only ``common`` and ``signals`` from here (``optimize`` also calls
-``restore.optimize_restored``); each defines ``commands``, a typer app that ``app.py`` puts in order.
+``restore.optimize_restored``; ``trace`` renders with ``trace_analyses``; ``plot_analyses`` shares ``plot``'s
+output options and titles); each defines ``commands``, a typer app that ``app.py`` puts in order.
 """

@@ -14,7 +14,8 @@ from typing import Annotated
 import typer
 
 from lensopt import __version__
-from lensopt.cli import design, formats, optimize, plot, qa, restore, simulate, sweep, tolerance, trace, warmup
+from lensopt.cli import (design, formats, optimize, plot, plot_analyses, qa, restore, simulate, sweep, tolerance, trace,
+                        warmup)
 from lensopt.cli.common import LensoptGroup, LowerLevelFormatter
 from lensopt.cli.signals import state
 from lensopt.errors import LensoptError
@@ -33,6 +34,9 @@ _by_name = {c.name: c for group in GROUPS for c in group.commands.registered_com
 if sorted(_by_name) != sorted(ORDER):  # a command added to a module must be placed in ORDER
     raise RuntimeError(f"lensopt.cli.app.ORDER is not the set of commands: {sorted(set(_by_name) ^ set(ORDER))}")
 app.registered_commands = [_by_name[name] for name in ORDER]
+# The plot group: plot.py's figures, then the designer's analyses (plot_analyses.py).
+plot.plot_app.registered_commands += [c for c in plot_analyses.commands.registered_commands
+                                      if c not in plot.plot_app.registered_commands]
 app.add_typer(plot.plot_app, name="plot")
 
 

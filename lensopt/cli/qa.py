@@ -135,14 +135,21 @@ def _render_accuracy(d: dict[str, Any]) -> None:
         console.print(f"simulation reference: {s['image']}, grid {s['grid']}, {s['fields']} fields, {s['sampling']}")
     if d.get("compile_s") is not None:
         console.print(f"compiled trace: first call (compilation) {d['compile_s']:.1f} s, excluded from the times")
-    t = Table(title="error vs time per knob (others at their defaults)", title_justify="left")
-    for col in ("knob", "setting", "ESR err", "RMS err", "aim err", "PSF NRMSE", "image RMSE", "time s", "note"):
-        t.add_column(col, justify="left" if col in ("knob", "setting", "note") else "right")
-    for p in d["points"]:
-        e = p["errors"]
-        cells = [f"{e[m]:.2e}" if m in e else "" for m in ("esr", "rms", "aim", "psf", "sim")]
-        t.add_row(p["knob"], p["setting"], *cells, f"{p['time_s']:.4f}", p["note"])
-    console.print(t)
+    from lensopt.qa.accuracy_analyses import ANALYSIS_KNOBS
+
+    core = [p for p in d["points"] if p["knob"] not in ANALYSIS_KNOBS]
+    if core:
+        t = Table(title="error vs time per knob (others at their defaults)", title_justify="left")
+        for col in ("knob", "setting", "ESR err", "RMS err", "aim err", "PSF NRMSE", "image RMSE", "time s", "note"):
+            t.add_column(col, justify="left" if col in ("knob", "setting", "note") else "right")
+        for p in core:
+            e = p["errors"]
+            cells = [f"{e[m]:.2e}" if m in e else "" for m in ("esr", "rms", "aim", "psf", "sim")]
+            t.add_row(p["knob"], p["setting"], *cells, f"{p['time_s']:.4f}", p["note"])
+        console.print(t)
+    analyses = [p for p in d["points"] if p["knob"] in ANALYSIS_KNOBS]
+    if analyses:
+        _render_analyses(analyses, d["reference"].get("analyses", {}))
     for m, front in d["pareto"].items():
         console.print(f"Pareto front ({m}): " + " → ".join(f"{p['setting']} ({p['errors'][m]:.1e}, {p['time_s']:.3g} s)"
                                                            for p in front))
@@ -155,3 +162,23 @@ def _render_accuracy(d: dict[str, Any]) -> None:
             bought = f"{b['setting']} ({b['errors'][m]:.2e})" if b else "nothing measured"
             line += f"; {d['budget_s']:g} s buys {bought}"
         console.print(line)
+
+
+def _render_analyses(points: list[dict[str, Any]], refs: dict[str, Any]) -> None:
+    """The designer's analyses (``qa.accuracy_analyses``): each setting's error against the same analysis at
+    its converged reference setting, and its time; the reference's own time on the knob's last row."""
+    from lensopt.qa.accuracy_analyses import ANALYSIS_ERRORS
+
+    t = Table(title="analyses: error vs time per knob (against the same analysis at the reference setting)",
+              title_justify="left")
+    for col in ("knob", "setting", "error", "time s", "error of"):
+        t.add_column(col, justify="right" if col in ("error", "time s") else "left")
+    for i, p in enumerate(points):
+        knob = p["knob"]
+        (err,) = p["errors"].values()
+        t.add_row(knob, p["setting"], f"{err:.2e}", f"{p['time_s']:.4f}", ANALYSIS_ERRORS[knob])
+        last = i + 1 == len(points) or points[i + 1]["knob"] != knob
+        if last and knob in refs and knob != "seidel":
+            t.add_row(knob, f"reference: {refs[knob]['reference']}", "—", f"{refs[knob]['time_s']:.4f}",
+                      "(one run)", style="dim")
+    console.print(t)

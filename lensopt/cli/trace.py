@@ -40,21 +40,50 @@ def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None,
           as_json: JsonOpt = False, aim_steps: AimStepsOpt = None,
           mtf: Annotated[str | None, typer.Option("--mtf", help="Also MTF at these cycles/mm (comma-separated; "
                                                   "in --json as mtf).")] = None,
-          backend: BackendOpt = "auto") -> None:
+          backend: BackendOpt = "auto",
+          wavefront: Annotated[bool, typer.Option(
+              "--wavefront", help="Also the wavefront per field and wavelength: RMS and P-V (waves), Strehl (PSF "
+              "and Maréchal), Zernike terms (in --json as wavefront).")] = False,
+          seidel: Annotated[bool, typer.Option(
+              "--seidel", help="Also the Seidel sums per surface and in total, mm and waves (in --json as "
+              "seidel).")] = False,
+          zernike: Annotated[str, typer.Option("--zernike", help="Zernike ordering of --wavefront: fringe | noll | "
+                                               "ansi.")] = "fringe",
+          pupil_grid: Annotated[int, typer.Option("--pupil-grid", min=4, max=512, metavar="N",
+                                                  help="Pupil grid N×N of --wavefront.")] = 64,
+          wide: Annotated[bool, typer.Option("--wide", help="--wavefront tables for every wavelength (default: "
+                                             "the reference wavelength).")] = False) -> None:
     """First-order data, RMS spot radius per field and wavelength, ray failures, distortion and
     relative illumination per field."""
     from lensopt.analysis.report import mtf_report, trace_report
+    from lensopt.analysis.zernike import ORDERINGS
 
+    if zernike not in ORDERINGS:
+        raise LensoptError(f"must be one of {', '.join(ORDERINGS)}", path="--zernike", got=zernike)
     model = load_model(lens)
     report = trace_report(model, parse_sampling(sampling, seed),
                           aim=check_aim(aim), aim_steps=check_aim_steps(aim_steps))
     if mtf is not None:
         report["mtf"] = mtf_report(model, parse_frequencies(mtf, "--mtf"))
+    if wavefront or seidel:
+        from lensopt.analysis.wavefront_report import seidel_report, wavefront_report
+
+        if wavefront:
+            report["wavefront"] = wavefront_report(model, ordering=zernike, pupil_grid=pupil_grid)
+        if seidel:
+            report["seidel"] = seidel_report(model)
     if as_json:
         print_json(report)
         return
     _render_trace(report)
     _render_field(report)
+    if wavefront or seidel:
+        from lensopt.cli.trace_analyses import render_seidel, render_wavefront
+
+        if wavefront:
+            render_wavefront(report["wavefront"], wide=wide)
+        if seidel:
+            render_seidel(report["seidel"])
 
 
 def _render_trace(r: dict[str, Any]) -> None:

@@ -56,7 +56,7 @@ def field_curves_figure(fc: FieldCurves, *, title: str = "", subtitle: str = "",
         ax_d.set_title("Distortion (real chief ray vs paraxial)")
         if airy_um is not None:
             ax_l.axvspan(-airy_um, airy_um, color="0.96", zorder=0)
-            ax_l.text(airy_um, 0.01 * top, " Airy\n radius", fontsize=7, color="0.45", va="bottom", ha="left")
+            ax_l.text(airy_um, 0.01 * top, "Airy\nradius ", fontsize=7, color="0.45", va="bottom", ha="right")
         _symmetric(ax_l, np.concatenate([lat.ravel(), [airy_um or 0.0]]), 0.1)
         ax_l.set_xlabel("lateral colour (µm)")
         ax_l.set_title(f"Lateral colour (vs {wl[fc.reference]:g} nm)")

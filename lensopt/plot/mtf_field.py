@@ -31,7 +31,8 @@ def mtf_field_figure(res: MtfField, *, title: str = "", subtitle: str = "") -> F
         ax.grid(True, color="0.93", lw=0.5)
         for side in ("top", "right"):
             ax.spines[side].set_visible(False)
-        ax.legend(ncol=2, loc="lower left", frameon=False)
+        fig.legend(*ax.get_legend_handles_labels(), ncol=min(2 * len(res.frequency), 6), loc="outside lower center",
+                   frameon=False)  # outside: no curve hides behind it
         note = f"{res.method} MTF · polychromatic · cutoff {res.cutoff:.4g} c/mm"
         fig.suptitle("\n".join(x for x in (title or "MTF vs field", subtitle, note) if x), fontsize=10)
     return fig

@@ -1,5 +1,6 @@
 """Through-focus MTF: the tangential (solid) and sagittal (dashed) MTF at one frequency per panel
-against the image-surface shift, one colour per field, the best focus of each curve marked."""
+against the image-surface shift, one colour per field, the best focus of each curve marked (▼), the legend
+under the panels."""
 
 from __future__ import annotations
 
@@ -26,6 +27,12 @@ def through_focus_figure(tf: ThroughFocus, *, title: str = "", subtitle: str = "
                 c = field_color(f)
                 ax.plot(z_um, tan[:, f, k], color=c, lw=1.4, label=f"{float(tf.field_deg[f]):.2f}° T")
                 ax.plot(z_um, sag[:, f, k], color=c, lw=1.4, ls="--", label=f"{float(tf.field_deg[f]):.2f}° S")
+            best = 1e3 * tf.best_focus_mm[:, k].detach().cpu().numpy()  # (F, 2): sagittal, tangential
+            inside = (best > z_um.min()) & (best < z_um.max())  # a maximum at a sweep end is not a best focus
+            for f in range(tan.shape[1]):
+                pts = [(best[f, 1], tan[:, f, k].max(), inside[f, 1]), (best[f, 0], sag[:, f, k].max(), inside[f, 0])]
+                xs, ys = [p[0] for p in pts if p[2]], [p[1] for p in pts if p[2]]
+                ax.scatter(xs, ys, color=field_color(f), marker="v", s=22, zorder=4, edgecolors="none")
             ax.axvline(0.0, color="0.55", lw=0.7)
             ax.set_xlim(float(z_um.min()), float(z_um.max()))
             ax.set_ylim(0.0, 1.02)
@@ -35,7 +42,8 @@ def through_focus_figure(tf: ThroughFocus, *, title: str = "", subtitle: str = "
             for side in ("top", "right"):
                 ax.spines[side].set_visible(False)
         axes[0].set_ylabel("modulation")
-        axes[-1].legend(ncol=2, loc="upper right", frameon=False, fontsize=7)
-        note = f"{tf.method} MTF · polychromatic · positive shift: away from the lens"
+        fig.legend(*axes[0].get_legend_handles_labels(), ncol=min(2 * tan.shape[1], 6), loc="outside lower center",
+                   frameon=False)  # outside: no curve hides behind it
+        note = f"{tf.method} MTF · polychromatic · positive shift: away from the lens · ▼ best focus"
         fig.suptitle("\n".join(x for x in (title or "Through-focus MTF", subtitle, note) if x), fontsize=10)
     return fig

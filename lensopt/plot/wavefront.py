@@ -43,11 +43,18 @@ def wavefront_figure(wm: WavefrontMap, wavelength: int, *, stats: WavefrontStats
     wf = wm.wavefront
     lam_nm = 1e3 * float(wf.wavelength_um[wavelength])
     order = np.argsort(wf.rel_field.cpu().numpy(), kind="stable")
+    per_row = 3  # maps per row: more fields wrap onto further rows
+    ncols = min(num_f, per_row)
+    nrows = -(-num_f // per_row)
     with matplotlib.rc_context(RC):
         rows = 3 + (zernike is not None) * top_terms
-        fig = new_figure(1.2 + 3.3 * num_f, 3.6 + 0.14 * rows)
-        grid = fig.subplots(2, num_f, squeeze=False, height_ratios=[3.0, 0.16 * rows + 0.1])
-        axes, notes = grid[0], grid[1]
+        fig = new_figure(1.2 + 3.3 * ncols, (3.0 + 0.14 * rows) * nrows + 0.6)
+        grid = fig.subplots(2 * nrows, ncols, squeeze=False, height_ratios=[3.0, 0.16 * rows + 0.1] * nrows)
+        axes = [grid[2 * (i // per_row), i % per_row] for i in range(num_f)]
+        notes = [grid[2 * (i // per_row) + 1, i % per_row] for i in range(num_f)]
+        for i in range(num_f, nrows * ncols):  # empty cells of the last row
+            grid[2 * (i // per_row), i % per_row].axis("off")
+            grid[2 * (i // per_row) + 1, i % per_row].axis("off")
         image = None
         for col, f in enumerate(order):
             ax = axes[col]
@@ -58,7 +65,7 @@ def wavefront_figure(wm: WavefrontMap, wavelength: int, *, stats: WavefrontStats
             ax.set_xticks([-1, 0, 1])
             ax.set_yticks([-1, 0, 1])
             ax.set_xlabel("px")
-            if col == 0:
+            if col % per_row == 0:
                 ax.set_ylabel("py")
             ax.set_title(f"{float(wf.field_deg[f]):.2f}° (rel. {float(wf.rel_field[f]):.2f})")
             lines = []
@@ -71,7 +78,7 @@ def wavefront_figure(wm: WavefrontMap, wavelength: int, *, stats: WavefrontStats
                              f"{float(strehl.marechal[f, wavelength]):.3f} (Maréchal)")
             if zernike is not None:
                 c = zernike.coefficients[f, wavelength].detach().cpu().numpy()
-                keep = [j for j, nm in enumerate(zernike.indices) if nm[0] > 1]
+                keep = [j for j, nm in enumerate(zernike.indices) if nm[0] > 1 and abs(c[j]) >= 5e-4]  # shown ≠ 0
                 top = sorted(keep, key=lambda j: -abs(c[j]))[:top_terms]
                 first = zernike.numbers[0]
                 lines.append(f"{zernike.ordering} Zernike (waves):")
@@ -81,7 +88,7 @@ def wavefront_figure(wm: WavefrontMap, wavelength: int, *, stats: WavefrontStats
             notes[col].text(0.0, 1.0, "\n".join(lines), transform=notes[col].transAxes, va="top", ha="left",
                             fontsize=7.5, family="monospace")
         if image is not None:
-            fig.colorbar(image, ax=list(axes), shrink=0.8, label="W (waves)")
+            fig.colorbar(image, ax=list(axes), shrink=0.8 if nrows == 1 else 0.5, label="W (waves)")
         note = (f"{lam_nm:g} nm · W = OPL(chief) − OPL(ray) to the chief ray's reference sphere (ahead-positive) · "
                 "RMS and P-V with tilt removed")
         fig.suptitle("\n".join(x for x in (title or "Wavefront map", subtitle, note) if x), fontsize=10)

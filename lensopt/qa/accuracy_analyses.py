@@ -33,7 +33,7 @@ from lensopt.optics.backend import use_backend
 from lensopt.qa.measure import Point, timed
 from lensopt.spec.build import Model
 
-__all__ = ["ANALYSIS_KNOBS", "ANALYSIS_METRICS", "analysis_points"]
+__all__ = ["ANALYSIS_KNOBS", "ANALYSIS_METRICS", "ANALYSIS_ERRORS", "analysis_points"]
 
 ANALYSIS_KNOBS = {"wavefront": "wfe", "zernike": "zernike", "strehl": "strehl", "seidel": "seidel",
                   "field_curves": "field", "focal_shift": "focal", "encircled": "ee",
@@ -42,6 +42,20 @@ ANALYSIS_METRICS = {"wfe": "RMS wavefront error, relative", "zernike": "Zernike 
                     "strehl": "Strehl ratio, absolute", "seidel": "Seidel sums (closed form)",
                     "field": "field curvature, relative", "focal": "focal shift curve, relative",
                     "ee": "encircled energy (r80 relative / EE absolute)", "mtf": "MTF, absolute"}
+
+ANALYSIS_ERRORS = {
+    "wavefront": "RMS wavefront error, relative, worst field × λ",
+    "zernike": "37 Fringe coefficients, max |Δc|/max |c|",
+    "strehl": "PSF Strehl ratio, absolute",
+    "seidel": "none: closed form, no sampling",
+    "field_curves": "T and S focus, max |Δ|/max |focus|",
+    "focal_shift": "focal shift curve, max |Δ|/range",
+    "encircled": "radius of 80 % encircled energy, relative",
+    "encircled_diffraction": "diffraction EE on axis, absolute",
+    "mtf_field": "MTF, 3 frequencies × 11 fields, absolute",
+    "through_focus": "MTF, 5 focus positions × fields, absolute",
+}
+"""What each knob's error measures (the table of the module doc; the column ``lensopt accuracy`` prints)."""
 
 
 def _rel(a: np.ndarray, b: np.ndarray) -> float:

@@ -114,6 +114,8 @@ def json_keys(tmp: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, list[str]
     runs: dict[str, list[str]] = {
         "trace": ["trace", cooke, "--sampling", "rings:4", "--json"],
         "trace --mtf": ["trace", cooke, "--sampling", "rings:4", "--mtf", "10,20", "--json"],
+        "trace --wavefront --seidel": ["trace", cooke, "--sampling", "rings:4", "--wavefront", "--seidel",
+                                       "--pupil-grid", "8", "--json"],
         "ray": ["ray", cooke, "--json"],
         "simulate --plan": ["simulate", cooke, str(image), "--plan", "--json"],
         "simulate": ["simulate", cooke, str(image), "-o", str(tmp / "sim.png"), "--rays", "rings:4", "--score",
