@@ -59,7 +59,8 @@ def check_seed(value: int | None) -> int | None:
 
 
 LensArg = Annotated[Path, typer.Argument(help="Lens spec (.toml) or resolved lens (.json).", show_default=False)]
-SamplingOpt = Annotated[str, typer.Option("--sampling", help="Pupil sampling: rings:N[:nojitter] or grid:N.")]
+SamplingOpt = Annotated[str, typer.Option("--sampling", help="Pupil sampling: gauss:N (weighted quadrature, 2N² "
+                                          "rays), rings:N[:nojitter] (the seed's rings) or grid:N.")]
 AimOpt = Annotated[str | None, typer.Option("--aim", help="Ray aiming: none | chief | full (default: the spec's).")]
 AimStepsOpt = Annotated[int | None, typer.Option("--aim-steps",
                                                  help="Newton steps of full aiming (default: the spec's).")]
@@ -80,10 +81,11 @@ def load_model(path: Path, device: Any = None) -> Model:
     return build(load_spec(path), device=device)
 
 
-def parse_sampling(text: str, seed: int, option: str = "--sampling"):  # noqa: ANN201
+def parse_sampling(text: str, seed: int, option: str = "--sampling", *, weighted: bool = True):  # noqa: ANN201
+    """``weighted``: the command's statistics read quadrature weights (``gauss:N`` allowed)."""
     from lensopt.optics.sampling import PupilSampling
 
-    return PupilSampling.parse(text, seed=seed, path=option)
+    return PupilSampling.parse(text, seed=seed, path=option, weighted=weighted)
 
 
 def check_aim(aim: str | None) -> str | None:

@@ -80,7 +80,7 @@ def accuracy(
                                         "NRMSE for PSFs, RMSE for images).")] = "1%",
     budget: Annotated[float | None, typer.Option("--budget", help="Seconds: also say what this buys.")] = None,
     knobs: Annotated[str | None, typer.Option("--knobs", help="Comma-separated knobs (default: all): rings, "
-                                              "rings_fixed, grid, float32, compiled, aim_steps, psf_rings, "
+                                              "rings_fixed, grid, gauss, float32, compiled, aim_steps, psf_rings, "
                                               "psf_kernel, psf_bins, diffraction, sim_grid, sim_overlap.")]
     = None,
     repeats: Annotated[int, typer.Option("--repeats", min=1, max=20, help="Timing repeats (median).")] = 3,

@@ -169,7 +169,7 @@ def sweep(
     restart: Annotated[bool, typer.Option("--restart", help="Start over in a folder that holds another "
                                           "sweep (its files are removed).")] = False,
     esr_sampling: Annotated[str, typer.Option("--esr-sampling", help="Pupil sampling of the reported ESR.")]
-    = "rings:24",
+    = "gauss:16",
     seed: SeedOpt = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress display.")] = False,
     as_json: JsonOpt = False,
@@ -187,7 +187,7 @@ def sweep(
         text = spec.read_text(encoding="utf-8")
     except OSError as err:
         raise LensoptError(f"cannot read the file: {err.strerror}", path=str(spec)) from None
-    PupilSampling.parse(esr_sampling, seed=seed, path="--esr-sampling")
+    PupilSampling.parse(esr_sampling, seed=seed, path="--esr-sampling", weighted=True)
     varies = [parse_vary(v) for v in vary]
     points = expand_grid(base, varies)
     settings = Settings(starts=starts, sigma=perturb, steps=steps, seed=seed, esr_sampling=esr_sampling)

@@ -36,7 +36,7 @@ commands = typer.Typer()  # its commands, put in order by lensopt.cli.app
 @commands.command("trace", short_help="First-order data, spot sizes, failures, distortion, illumination.")
 @handle_errors
 @with_backend
-def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None, seed: SeedOpt = 0,
+def trace(lens: LensArg, sampling: SamplingOpt = "gauss:16", aim: AimOpt = None, seed: SeedOpt = 0,
           as_json: JsonOpt = False, aim_steps: AimStepsOpt = None,
           mtf: Annotated[str | None, typer.Option("--mtf", help="Also MTF at these cycles/mm (comma-separated; "
                                                   "in --json as mtf).")] = None,

@@ -59,7 +59,7 @@ class Settings:
         floor: the scale of variables that start at (or near) zero: σ·max(|θ0ᵢ|, floor).
         steps: optimizer steps (None: the spec's ``optimize.steps``).
         seed: pupil jitter seed of ``optimize`` and first word of the perturbation seed.
-        esr_sampling: pupil sampling of the reported ESR (``lensopt optimize`` reports rings:24).
+        esr_sampling: pupil sampling of the reported ESR (``lensopt optimize`` reports gauss:16).
     """
 
     starts: int = 1
@@ -67,7 +67,7 @@ class Settings:
     floor: float = 0.1
     steps: int | None = None
     seed: int = 0
-    esr_sampling: str = "rings:24"
+    esr_sampling: str = "gauss:16"
 
 
 @dataclass(frozen=True)
@@ -239,7 +239,7 @@ def _report_esr(spec: LensSpec, settings: Settings) -> float | None:
     from lensopt.optics.sampling import PupilSampling
     from lensopt.spec.build import build
 
-    rep = trace_report(build(spec), PupilSampling.parse(settings.esr_sampling, seed=settings.seed))
+    rep = trace_report(build(spec), PupilSampling.parse(settings.esr_sampling, seed=settings.seed, weighted=True))
     return rep["effective_spot_radius_um"]
 
 
