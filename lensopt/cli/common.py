@@ -31,6 +31,7 @@ except ImportError:  # pragma: no cover
     from click import exceptions as click_exc  # type: ignore[no-redef]
 
 from lensopt.cli.signals import EX_SIGINT, command_signals, report_signal, state
+from lensopt.cli.tables import fit_width
 from lensopt.errors import LensoptError
 from lensopt.files import json_safe
 
@@ -46,8 +47,8 @@ EX_USAGE, EX_INTERNAL = 2, 70
 F = TypeVar("F", bound=Callable[..., Any])
 
 
-# Wide enough for tables when the stream is a pipe or a file (rich would assume 80 columns).
-console = Console(width=None if sys.stdout.isatty() else 160)
+# Tables: COLUMNS, else the terminal, else 80 columns (``cli.tables.fit_width``, applied as each command starts).
+console = Console(soft_wrap=True)  # lines of text are not cut into lines; tables fit the width
 err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 1000)
 
 
@@ -191,6 +192,7 @@ class LensoptGroup(TyperGroup):
              standalone_mode: bool = True, **extra: Any) -> Any:
         code = 0
         state.signal_exit, state.signal_reported, state.signal_received, state.verbose = EX_SIGINT, False, False, False
+        fit_width(console, sys.stdout)
         try:
             with command_signals():
                 rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)

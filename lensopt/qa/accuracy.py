@@ -62,7 +62,8 @@ __all__ = ["KNOBS", "DEFAULT_KNOBS", "Point", "AccuracyResult", "run_accuracy", 
 REF_TOL = 1e-9
 SPOT_N = (4, 6, 8, 12, 16, 24, 32, 48, 64)
 KNOBS = {
-    "rings": "esr", "rings_fixed": "esr", "grid": "esr", "gauss": "esr", "float32": "esr", "compiled": "esr", "aim_steps": "aim",
+    "rings": "esr", "rings_fixed": "esr", "grid": "esr", "gauss": "esr", "float32": "esr", "compiled": "esr",
+    "aim_steps": "aim",
     "psf_rings": "psf", "psf_kernel": "psf", "psf_bins": "psf", "diffraction": "psf",
     "sim_grid": "sim", "sim_overlap": "sim",
     "wavefront": "wfe", "zernike": "zernike", "strehl": "strehl", "seidel": "seidel", "field_curves": "field",
