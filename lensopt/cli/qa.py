@@ -10,6 +10,7 @@ import typer
 from rich.table import Table
 
 from lensopt.cli.common import console, err_console, handle_errors, load_model, print_json
+from lensopt.cli.tables import compact_table, show
 from lensopt.errors import LensoptError
 
 __all__ = ["commands"]
@@ -135,14 +136,19 @@ def _render_accuracy(d: dict[str, Any]) -> None:
         console.print(f"simulation reference: {s['image']}, grid {s['grid']}, {s['fields']} fields, {s['sampling']}")
     if d.get("compile_s") is not None:
         console.print(f"compiled trace: first call (compilation) {d['compile_s']:.1f} s, excluded from the times")
-    t = Table(title="error vs time per knob (others at their defaults)", title_justify="left")
-    for col in ("knob", "setting", "ESR err", "RMS err", "aim err", "PSF NRMSE", "image RMSE", "time s", "note"):
-        t.add_column(col, justify="left" if col in ("knob", "setting", "note") else "right")
+    # Only the error columns some point has (``--knobs rings,gauss``: ESR and RMS), notes only if any.
+    metrics = [(m, name) for m, name in (("esr", "ESR err"), ("rms", "RMS err"), ("aim", "aim err"),
+                                         ("psf", "PSF NRMSE"), ("sim", "image RMSE"))
+               if any(m in p["errors"] for p in d["points"])]
+    notes = any(p["note"] for p in d["points"])
+    t = compact_table("error vs time per knob (others at their defaults)",
+                      [("knob", "left"), ("setting", "left"), *((name, "right") for _, name in metrics),
+                       ("time s", "right"), *([("note", "left")] if notes else [])])
     for p in d["points"]:
         e = p["errors"]
-        cells = [f"{e[m]:.2e}" if m in e else "" for m in ("esr", "rms", "aim", "psf", "sim")]
-        t.add_row(p["knob"], p["setting"], *cells, f"{p['time_s']:.4f}", p["note"])
-    console.print(t)
+        cells = [f"{e[m]:.2e}" if m in e else "" for m, _ in metrics]
+        t.add_row(p["knob"], p["setting"], *cells, f"{p['time_s']:.4f}", *([p["note"]] if notes else []))
+    show(console, t)
     for m, front in d["pareto"].items():
         console.print(f"Pareto front ({m}): " + " → ".join(f"{p['setting']} ({p['errors'][m]:.1e}, {p['time_s']:.3g} s)"
                                                            for p in front))
