@@ -231,7 +231,8 @@ def _coefficient_tables(surfaces: list[dict[str, Any]], wide: bool) -> None:
 def ray(
     lens: LensArg,
     field: Annotated[float, typer.Option("--field", help="Field angle in degrees.")] = 0.0,
-    pupil: Annotated[tuple[float, float], typer.Option("--pupil", help="Relative pupil PX PY.")] = (0.0, 1.0),
+    pupil: Annotated[tuple[float, float], typer.Option("--pupil", help="Relative pupil PX PY, within the unit "
+                                                       "circle (1: the pupil edge).")] = (0.0, 1.0),
     wavelength: Annotated[float | None, typer.Option("--wavelength", help="nm (default: reference).")] = None,
     aim: AimOpt = None,
     as_json: JsonOpt = False,
@@ -243,6 +244,9 @@ def ray(
         raise LensoptError("must be a field angle in degrees, strictly between -90 and 90", path="--field", got=field)
     if not all(math.isfinite(p) for p in pupil):
         raise LensoptError("must be two finite relative pupil coordinates", path="--pupil", got=pupil)
+    if math.hypot(*pupil) > 1.0 + 1e-12:
+        raise LensoptError("relative pupil coordinates must lie within the unit circle, px² + py² ≤ 1 (1 is the "
+                           "pupil edge)", path="--pupil", got=f"{pupil[0]:g} {pupil[1]:g}")
     model = load_model(lens)
     if wavelength is None:
         wavelength = model.spec.spectrum.wavelengths_nm[model.system.reference]
