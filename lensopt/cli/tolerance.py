@@ -12,6 +12,7 @@ import typer
 from rich.table import Table
 
 from lensopt.cli.common import JsonOpt, LensArg, check_seed, console, handle_errors, load_model, print_json
+from lensopt.cli.tables import compact_table, show
 from lensopt.errors import LensoptError
 
 __all__ = ["commands", "parse_fields", "tolerance_report"]
@@ -227,21 +228,24 @@ def _plots(out_dir: Path, report: dict[str, Any], mc: Any, rows: list[Any], metr
     report["plots"] = [str(out_dir / f) for f in files]
 
 
-def _render(r: dict[str, Any], top: int = 15) -> None:
+def _render(r: dict[str, Any]) -> None:
+    """The report as tables: every sensitivity row (most harmful first), RSS, Monte Carlo, yields."""
     unit = r["unit"]
     console.print(f"[bold]{r['lens']}[/] — metric {r['metric']} {unit}, compensator {r['compensator']}, "
                   f"sampling {r['sampling']}, {len(r['fields'])} fields, aim {r['aim']}; "
                   f"nominal {r['nominal']['value']:.4f} "
                   f"(focus shift {r['nominal']['focus_shift_mm'] * 1e3:+.1f} µm), {len(r['tolerances'])} tolerances")
     if "sensitivity" in r:
-        t = Table(title=f"Sensitivity (Δ {r['metric']} at ∓limit), inverse for Δ = {r['inverse_target']:.4g}")
-        for col in ("tolerance", "limit", "Δ at −", "Δ at +", "inverse ±", "focus ± (µm)"):
-            t.add_column(col, justify="right" if col != "tolerance" else "left")
-        for s in r["sensitivity"][:top]:
+        rows = r["sensitivity"]
+        t = compact_table(f"Sensitivity of {r['metric']} at ∓limit, all {len(rows)} tolerances, most harmful first; "
+                          f"inverse: the ± that changes it by {r['inverse_target']:.4g}",
+                          [("tolerance", "left"), ("limit", "right"), ("Δ at −", "right"), ("Δ at +", "right"),
+                           ("inverse ±", "right"), ("focus ± (µm)", "right")])
+        for s in rows:
             t.add_row(s["name"], f"{s['limit']:g}", f"{s['minus']:+.4f}", f"{s['plus']:+.4f}",
                       "∞" if math.isinf(s["inverse"]) else f"{s['inverse']:.4g}",
                       f"{s['focus_minus_mm'] * 1e3:+.1f}/{s['focus_plus_mm'] * 1e3:+.1f}")
-        console.print(t)
+        show(console, t)
         rss = r["rss"]
         at = "≥" if r["higher_is_better"] else "≤"
         console.print(f"RSS prediction: mean {rss['mean']:.4f}, std {rss['std']:.4f}, 90 % {at} {rss['p90']:.4f}; "
