@@ -45,8 +45,10 @@ def tolerance_cmd(
                                             "its own (decentered) stop centre.")] = None,
     compensator: Annotated[str | None, typer.Option("--compensator", help="focus | lm | none (lm: "
                                                     "the spec's variables by a few LM steps).")] = None,
-    scheduler: Annotated[str, typer.Option("--scheduler", help="local (a 2-worker Dask LocalCluster), "
-                                           "serial, or a Dask scheduler address.")] = "local",
+    scheduler: Annotated[str, typer.Option("--scheduler", help="auto (serial unless the trials left after "
+                                           "the first chunk are estimated at 30 s or more and 2+ cores are "
+                                           "free: then a LocalCluster), local (a Dask LocalCluster of "
+                                           "--workers), serial, or a Dask scheduler address.")] = "auto",
     workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="LocalCluster workers.")] = 2,
     output_dir: Annotated[Path | None, typer.Option("--output-dir", "-o", help="Folder for plots (CDF, "
                                                     "histogram, sensitivity) and the worst trials.")] = None,
@@ -162,12 +164,15 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
         report["rss"] = rss_prediction(rows, job.tols, m0, higher_is_better=HIGHER_IS_BETTER[job.metric])
     if settings.trials > 0:
         start = time.perf_counter()
-        mc = monte_carlo(job, settings.trials, settings.seed, scheduler=scheduler, workers=workers)
+        plan: list[str] = []
+        mc = monte_carlo(job, settings.trials, settings.seed, scheduler=scheduler, workers=workers,
+                         on_plan=plan.append)
         elapsed = time.perf_counter() - start
         per = {k: _describe(v) for k, v in mc.metrics.items() if v.ndim == 1 and k != "compensator_ok"}
         report["monte_carlo"] = {"trials": mc.num_trials, "seconds": elapsed,
                                  "seconds_per_trial": elapsed / mc.num_trials,
-                                 "scheduler": scheduler or "serial", "stats": mc.stats, "yields": mc.yields,
+                                 "scheduler": plan[-1] if plan else scheduler or "serial", "stats": mc.stats,
+                                 "yields": mc.yields,
                                  "metrics": per}
         if out_dir is not None:
             out_dir.mkdir(parents=True, exist_ok=True)
@@ -253,8 +258,8 @@ def _render(r: dict[str, Any]) -> None:
     if "monte_carlo" in r:
         mc = r["monte_carlo"]
         st = mc["stats"]
-        console.print(f"Monte Carlo: {mc['trials']} trials ({mc['scheduler']}), {mc['seconds_per_trial']:.4f} s/trial "
-                      f"(wall time, cluster start included); "
+        console.print(f"Monte Carlo: {mc['trials']} trials, {mc['scheduler']}; {mc['seconds_per_trial']:.4f} s/trial "
+                      f"(wall time, a cluster's start included); "
                       f"mean {st['mean']:.4f}, std {st['std']:.4f}, min {st['min']:.4f}, max {st['max']:.4f}; "
                       f"trials with failed rays {st['trials_with_failed_rays']}, "
                       f"compensator failures {st['compensator_failures']}")

@@ -384,13 +384,14 @@ def _is_num(v: Any) -> bool:
 def run_sweep(spec: LensSpec, spec_text: str, varies: Sequence[Vary], settings: Settings, outdir: Path, *,
               scheduler: str | None = None, workers: int = 2, restart: bool = False, spec_name: str = "",
               callback: Callable[[SweepEvent], None] | None = None, plot: bool = True,
-              points: list[Point] | None = None) -> SweepResult:
+              points: list[Point] | None = None, on_plan: Callable[[str], None] | None = None) -> SweepResult:
     """Run (or resume) a sweep into ``outdir`` and write its outputs.
 
     Args:
         spec_text: the spec file's text (for the manifest hash).
-        scheduler: None (serial), ``local`` or a Dask scheduler address (``lensopt.parallel``).
+        scheduler: None (serial), ``auto``, ``local`` or a Dask scheduler address (``lensopt.parallel``).
         points: the grid if already expanded (``expand_grid``).
+        on_plan: told in words how the tasks run (what ``auto`` chose and why).
 
     A KeyboardInterrupt (Ctrl-C) stops the run: the finished tasks stay on disk, the table of what
     finished is written (no plot) and the result says ``interrupted``.
@@ -428,7 +429,8 @@ def run_sweep(spec: LensSpec, spec_text: str, varies: Sequence[Vary], settings: 
             callback(SweepEvent("done", t.point, t.start, record))
 
     try:
-        run_tasks(run_task, todo, shared=settings, scheduler=scheduler, workers=workers, on_done=done)
+        run_tasks(run_task, todo, shared=settings, scheduler=scheduler, workers=workers, on_done=done,
+                  on_plan=on_plan)
     except KeyboardInterrupt:
         result.interrupted = True
     result.rows = table(points, records, settings.starts)
