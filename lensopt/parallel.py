@@ -6,6 +6,16 @@ each worker once, the items one by one. Results come back in the order of ``item
 workers finish in, so a serial run and a distributed run give the same list; ``on_done`` sees each
 result as it arrives (to write it to disk or show progress). ``init_distributed`` and
 ``check_same_settings`` set up the data-parallel training runs (``train-irm``, the joint optimization).
+
+**Which scheduler (``auto``, the default of ``tolerance`` and ``sweep``).** A Dask LocalCluster costs its
+start-up — worker processes that import torch and lensopt, the shared object sent to each, the close —
+measured 13–15 s on the 2-core development machines, and it can at best divide the work by its
+worker count W. It therefore pays only when the work left is more than W/(W − 1) times that start-up
+(twice it for 2 workers). ``auto`` runs the first task in this process, times it, and estimates the
+work left as that time × the tasks left: below ``AUTO_SERIAL_BELOW_S`` (30 s), or with fewer than two
+usable CPU cores, the rest runs serially too; above it, on a LocalCluster of
+min(workers, cores) processes. (The Monte Carlo of ``tolerance lenses/cmount_4p.json --profile s6.2
+--trials 200`` is ~5 s of work: serial, 3× faster than on the cluster.)
 """
 
 from __future__ import annotations
@@ -14,12 +24,17 @@ import contextlib
 import json
 import logging
 import os
+import time
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, TypeVar
 
 from lensopt.errors import LensoptError
 
-__all__ = ["dask_client", "run_tasks", "init_distributed", "check_same_settings"]
+__all__ = ["AUTO_SERIAL_BELOW_S", "auto_plan", "dask_client", "run_tasks", "init_distributed",
+           "check_same_settings"]
+
+AUTO_SERIAL_BELOW_S = 30.0
+"""``auto`` keeps estimated work below this many seconds in this process (see the module doc)."""
 
 S = TypeVar("S")
 T = TypeVar("T")
@@ -35,8 +50,10 @@ def dask_client(scheduler: str, workers: int) -> Iterator[Any]:
     # Dask logs every connection at INFO; keep that to --verbose runs (root logger at INFO or below).
     log = logging.getLogger("distributed")
     old_level = log.level
+    # Its warnings are about its own machinery (a worker slow to stop at close: "still alive after 4.0
+    # seconds, killing"), not about the tasks, whose errors come back as exceptions: errors only.
     if logging.getLogger().getEffectiveLevel() > logging.INFO:
-        log.setLevel(max(old_level, logging.WARNING))
+        log.setLevel(max(old_level, logging.ERROR))
     cluster = None
     if scheduler == "local":
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
@@ -52,17 +69,61 @@ def dask_client(scheduler: str, workers: int) -> Iterator[Any]:
         log.setLevel(old_level)
 
 
+def usable_cores() -> int:
+    """CPU cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def auto_plan(first_s: float, left: int, workers: int, cores: int | None = None) -> tuple[str | None, str]:
+    """What ``auto`` does with ``left`` tasks after a first one that took ``first_s`` seconds: (None,
+    why) to go on serially, or ("local", why) for a LocalCluster (the rule of the module doc)."""
+    cores = usable_cores() if cores is None else cores
+    work = first_s * left
+    if left == 0:
+        return None, "serial (one task)"
+    if min(workers, cores) < 2:
+        return None, f"serial ({cores} usable CPU core{'s' if cores != 1 else ''})"
+    if work < AUTO_SERIAL_BELOW_S:
+        return None, (f"serial (auto: about {work:.1f} s of work left, below the {AUTO_SERIAL_BELOW_S:g} s a "
+                      "local cluster needs to pay for its start)")
+    return "local", f"local cluster of {min(workers, cores)} workers (auto: about {work:.0f} s of work left)"
+
+
 def run_tasks(fn: Callable[[S, T], R], items: Sequence[T], *, shared: S, scheduler: str | None = None,
-              workers: int = 2, on_done: Callable[[int, R], None] | None = None) -> list[R]:
+              workers: int = 2, on_done: Callable[[int, R], None] | None = None,
+              on_plan: Callable[[str], None] | None = None) -> list[R]:
     """``[fn(shared, item) for item in items]``, serially (``scheduler`` None) or on Dask.
 
     Args:
         fn: a module-level function (workers import it by name).
-        scheduler: None (in this process, in order), ``local`` (a LocalCluster of ``workers``
-            processes) or a scheduler address.
+        scheduler: None (in this process, in order), ``auto`` (the first task here, then serial or a
+            LocalCluster by ``auto_plan``), ``local`` (a LocalCluster of ``workers`` processes) or a
+            scheduler address.
         on_done: called in this process as ``on_done(index, result)`` when a task finishes (in the order
             they finish on Dask). A KeyboardInterrupt stops the run; finished tasks have been reported.
+        on_plan: told in words how the tasks run (serial, a cluster, what ``auto`` chose and why).
     """
+    if scheduler == "auto":
+        if not items:
+            return []
+        t0 = time.perf_counter()
+        first = fn(shared, items[0])
+        took = time.perf_counter() - t0
+        if on_done is not None:
+            on_done(0, first)
+        sched, why = auto_plan(took, len(items) - 1, workers)
+        if on_plan is not None:
+            on_plan(why)
+        shift = None if on_done is None else (lambda i, r: on_done(i + 1, r))
+        rest = run_tasks(fn, items[1:], shared=shared, scheduler=sched, workers=min(workers, usable_cores()),
+                         on_done=shift)
+        return [first, *rest]
+    if on_plan is not None:
+        on_plan("serial" if scheduler is None else
+                f"local cluster of {workers} workers" if scheduler == "local" else f"Dask scheduler {scheduler}")
     if scheduler is None:
         out = []
         for i, item in enumerate(items):

@@ -64,6 +64,10 @@ CASES = [
     (["ray", "{good.toml}", "--field", "95"], "--field: "),
     (["ray", "{good.toml}", "--field", "inf"], "--field: "),
     (["ray", "{good.toml}", "--pupil", "nan", "0"], "--pupil: "),
+    (["ray", "{good.toml}", "--pupil", "0", "1.5"],
+     "--pupil: relative pupil coordinates must lie within the unit circle, px² + py² ≤ 1 (1 is the pupil edge) "
+     "(got '0 1.5')"),
+    (["ray", "{good.toml}", "--pupil", "0.8", "0.7"], "--pupil: relative pupil coordinates must lie within"),
     (["ray", "{good.toml}", "--wavelength", "-5"], "--wavelength: must be a positive wavelength in nm"),
     (["ray", "{good.toml}", "--wavelength", "inf"], "--wavelength: "),
     (["ray", "{missing.toml}"], "{missing.toml}: no such file"),

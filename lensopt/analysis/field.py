@@ -110,7 +110,7 @@ def field_summary(
         shape = pupil_shape(lens, system, tan, fo, aim=mode, aim_steps=steps, vignetting=fixed)
         opts = {"rel_field": fields, "aim": mode, "aim_steps": steps, "fo": fo, "shape": shape}
         bundle = trace_bundle(lens, system, sampling.points(dtype=dtype, device=device), half_pupil=sampling.half,
-                              **opts)
+                              pupil_weights=sampling.weights(dtype=dtype, device=device), **opts)
         stats = spot_stats(bundle, system.wavelength_weights)
         dist = distortion(lens, system, bundle, stats)
         y_par = paraxial_heights(lens, system, bundle)

@@ -44,6 +44,8 @@ def relative_illumination_std(bundle: Bundle, wavelength_weights: Tensor) -> Ten
     res = bundle.result
     valid = res.valid
     w = wavelength_weights.to(res.dir.dtype)[None, :, None] * valid.to(res.dir.dtype)
+    if bundle.pupil_weights is not None:  # a quadrature's pupil-area weights
+        w = w * bundle.pupil_weights.to(w.dtype)
     total = w.sum((1, 2)).clamp_min(torch.finfo(w.dtype).tiny)
 
     def std(v: Tensor, zero_mean: bool) -> Tensor:

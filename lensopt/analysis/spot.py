@@ -1,7 +1,8 @@
 """Spot diagrams: centroids, RMS spot radius per field (S23–S24) and the effective spot radius (S4.2.1).
 
 All statistics are masked: failed rays are excluded (their rows stay, with zero weight), and every
-result is a differentiable tensor.
+result is a differentiable tensor. A bundle with ``pupil_weights`` (a quadrature such as ``gauss:N``)
+weighs every ray by its pupil area.
 """
 
 from __future__ import annotations
@@ -55,6 +56,8 @@ def spot_stats(bundle: Bundle, wavelength_weights: Tensor, field_weights: Tensor
     xy = res.pos[..., :2]
     valid = res.valid
     m = valid.to(xy.dtype)
+    if bundle.pupil_weights is not None:
+        m = m * bundle.pupil_weights.to(xy.dtype)
     ww = wavelength_weights.to(xy.dtype)[None, :, None] * m  # (F, W, P)
 
     def centroid(weights: Tensor, dims: tuple[int, ...]) -> Tensor:

@@ -78,13 +78,15 @@ def spot_diagram(
     """Trace the pupil ``sampling`` for every field and wavelength and collect the spot diagrams.
 
     Args:
-        sampling: pupil sampling scheme (``rings:N`` samples the half pupil, ``grid:N`` the full one).
+        sampling: pupil sampling scheme (``rings:N`` and ``gauss:N`` sample the half pupil, ``grid:N`` the full
+            one; ``gauss:N`` weighs the statistics by its quadrature weights).
         aim: ``none`` or ``chief``; default: the system's.
         rel_field: (F,) relative fields; default: the system's.
         fo: precomputed first-order data.
     """
     pts = sampling.points(dtype=lens.dtype, device=lens.device)
-    bundle = trace_bundle(lens, system, pts, half_pupil=sampling.half, rel_field=rel_field, aim=aim, fo=fo)
+    bundle = trace_bundle(lens, system, pts, half_pupil=sampling.half, rel_field=rel_field, aim=aim, fo=fo,
+                          pupil_weights=sampling.weights(dtype=lens.dtype, device=lens.device))
     fo = bundle.first_order
     chief = trace_bundle(lens, system, torch.zeros(1, 2, dtype=lens.dtype, device=lens.device),
                          rel_field=bundle.rel_field, aim=aim, fo=fo)

@@ -14,8 +14,20 @@ from typing import Annotated
 import typer
 
 from lensopt import __version__
-from lensopt.cli import (design, formats, optimize, plot, plot_analyses, qa, restore, simulate, sweep, tolerance, trace,
-                        warmup)
+from lensopt.cli import (
+    design,
+    formats,
+    optimize,
+    plot,
+    plot_analyses,
+    qa,
+    restore,
+    simulate,
+    sweep,
+    tolerance,
+    trace,
+    warmup,
+)
 from lensopt.cli.common import LensoptGroup, LowerLevelFormatter
 from lensopt.cli.signals import state
 from lensopt.errors import LensoptError

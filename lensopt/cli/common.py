@@ -31,6 +31,7 @@ except ImportError:  # pragma: no cover
     from click import exceptions as click_exc  # type: ignore[no-redef]
 
 from lensopt.cli.signals import EX_SIGINT, command_signals, report_signal, state
+from lensopt.cli.tables import fit_width
 from lensopt.errors import LensoptError
 from lensopt.files import json_safe
 
@@ -47,8 +48,8 @@ EX_USAGE, EX_INTERNAL = 2, 70
 F = TypeVar("F", bound=Callable[..., Any])
 
 
-# Wide enough for tables when the stream is a pipe or a file (rich would assume 80 columns).
-console = Console(width=None if sys.stdout.isatty() else 160)
+# Tables: COLUMNS, else the terminal, else 80 columns (``cli.tables.fit_width``, applied as each command starts).
+console = Console(soft_wrap=True)  # lines of text are not cut into lines; tables fit the width
 err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 1000)
 
 
@@ -60,7 +61,8 @@ def check_seed(value: int | None) -> int | None:
 
 
 LensArg = Annotated[Path, typer.Argument(help="Lens spec (.toml) or resolved lens (.json).", show_default=False)]
-SamplingOpt = Annotated[str, typer.Option("--sampling", help="Pupil sampling: rings:N[:nojitter] or grid:N.")]
+SamplingOpt = Annotated[str, typer.Option("--sampling", help="Pupil sampling: gauss:N (weighted quadrature, 2N² "
+                                          "rays), rings:N[:nojitter] (the seed's rings) or grid:N.")]
 AimOpt = Annotated[str | None, typer.Option("--aim", help="Ray aiming: none | chief | full (default: the spec's).")]
 AimStepsOpt = Annotated[int | None, typer.Option("--aim-steps",
                                                  help="Newton steps of full aiming (default: the spec's).")]
@@ -81,10 +83,11 @@ def load_model(path: Path, device: Any = None) -> Model:
     return build(load_spec(path), device=device)
 
 
-def parse_sampling(text: str, seed: int, option: str = "--sampling"):  # noqa: ANN201
+def parse_sampling(text: str, seed: int, option: str = "--sampling", *, weighted: bool = True):  # noqa: ANN201
+    """``weighted``: the command's statistics read quadrature weights (``gauss:N`` allowed)."""
     from lensopt.optics.sampling import PupilSampling
 
-    return PupilSampling.parse(text, seed=seed, path=option)
+    return PupilSampling.parse(text, seed=seed, path=option, weighted=weighted)
 
 
 def check_aim(aim: str | None) -> str | None:
@@ -190,6 +193,7 @@ class LensoptGroup(TyperGroup):
              standalone_mode: bool = True, **extra: Any) -> Any:
         code = 0
         state.signal_exit, state.signal_reported, state.signal_received, state.verbose = EX_SIGINT, False, False, False
+        fit_width(console, sys.stdout)
         try:
             with command_signals():
                 rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
@@ -260,10 +264,11 @@ class LowerLevelFormatter(logging.Formatter):
 
 
 def check_scheduler(scheduler: str) -> str | None:
-    """``--scheduler``: None for serial, else ``local`` or a Dask scheduler address."""
+    """``--scheduler``: None for serial, else ``auto``, ``local`` or a Dask scheduler address."""
     if scheduler == "serial":
         return None
-    if scheduler == "local" or "://" in scheduler or (":" in scheduler and scheduler.rsplit(":", 1)[1].isdigit()):
+    if scheduler in ("auto", "local") or "://" in scheduler or (
+            ":" in scheduler and scheduler.rsplit(":", 1)[1].isdigit()):
         return scheduler
-    raise LensoptError("expected local, serial or a Dask scheduler address (tcp://host:8786)", path="--scheduler",
-                       got=scheduler)
+    raise LensoptError("expected auto, local, serial or a Dask scheduler address (tcp://host:8786)",
+                       path="--scheduler", got=scheduler)

@@ -142,8 +142,10 @@ def design(
                                               "spec's).")] = None,
     budget_cpu_h: Annotated[float | None, typer.Option("--budget-cpu-h", help="Stop starting rounds once the "
                                                        "starts used this many CPU-hours.")] = None,
-    scheduler: Annotated[str, typer.Option("--scheduler", help="local (a Dask LocalCluster of --workers "
-                                           "processes), serial, or a Dask scheduler address.")] = "local",
+    scheduler: Annotated[str, typer.Option("--scheduler", help="auto (serial unless the starts left after "
+                                           "the first are estimated at 30 s or more and 2+ cores are free: "
+                                           "then a LocalCluster), local (a Dask LocalCluster of --workers "
+                                           "processes), serial, or a Dask scheduler address.")] = "auto",
     workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="LocalCluster workers.")] = 2,
     restart: Annotated[bool, typer.Option("--restart", help="Start over in a folder that holds another run "
                                           "(its files are removed).")] = False,

@@ -191,7 +191,7 @@ def optimize(
     from lensopt.analysis.report import trace_report
     from lensopt.design import build_problem
     from lensopt.design import optimize as run_optimize
-    from lensopt.optics.sampling import PupilSampling
+    from lensopt.optics.sampling import DEFAULT_REPORT_SAMPLING, PupilSampling
     from lensopt.optim.report import constraint_report
     from lensopt.spec import build, load_spec, save_json
 
@@ -222,7 +222,7 @@ def optimize(
         raise typer.Exit(report_signal(line)) from None
     with signals_deferred():  # a second signal waits until the file is complete
         save_json(result.spec, output)  # atomic
-    sampling = PupilSampling.parse("rings:24", seed=seed)
+    sampling = PupilSampling.parse(DEFAULT_REPORT_SAMPLING, seed=seed, weighted=True)
     final_problem = build_problem(result.spec, seed=seed)
     s = summary(result, trace_report(build(start_spec), sampling), trace_report(build(result.spec), sampling),
                 constraint_report(final_problem, final_problem.theta0, sampling), str(output))

@@ -10,6 +10,7 @@ import typer
 from rich.table import Table
 
 from lensopt.cli.common import console, err_console, handle_errors, load_model, print_json
+from lensopt.cli.tables import compact_table, show
 from lensopt.errors import LensoptError
 
 __all__ = ["commands"]
@@ -80,7 +81,7 @@ def accuracy(
                                         "NRMSE for PSFs, RMSE for images).")] = "1%",
     budget: Annotated[float | None, typer.Option("--budget", help="Seconds: also say what this buys.")] = None,
     knobs: Annotated[str | None, typer.Option("--knobs", help="Comma-separated knobs (default: all): rings, "
-                                              "rings_fixed, grid, float32, compiled, aim_steps, psf_rings, "
+                                              "rings_fixed, grid, gauss, float32, compiled, aim_steps, psf_rings, "
                                               "psf_kernel, psf_bins, diffraction, sim_grid, sim_overlap.")]
     = None,
     repeats: Annotated[int, typer.Option("--repeats", min=1, max=20, help="Timing repeats (median).")] = 3,
@@ -139,14 +140,19 @@ def _render_accuracy(d: dict[str, Any]) -> None:
 
     core = [p for p in d["points"] if p["knob"] not in ANALYSIS_KNOBS]
     if core:
-        t = Table(title="error vs time per knob (others at their defaults)", title_justify="left")
-        for col in ("knob", "setting", "ESR err", "RMS err", "aim err", "PSF NRMSE", "image RMSE", "time s", "note"):
-            t.add_column(col, justify="left" if col in ("knob", "setting", "note") else "right")
+        # Only the error columns some point has (``--knobs rings,gauss``: ESR and RMS), notes only if any.
+        metrics = [(m, name) for m, name in (("esr", "ESR err"), ("rms", "RMS err"), ("aim", "aim err"),
+                                             ("psf", "PSF NRMSE"), ("sim", "image RMSE"))
+                   if any(m in p["errors"] for p in core)]
+        notes = any(p["note"] for p in core)
+        t = compact_table("error vs time per knob (others at their defaults)",
+                          [("knob", "left"), ("setting", "left"), *((name, "right") for _, name in metrics),
+                           ("time s", "right"), *([("note", "left")] if notes else [])])
         for p in core:
             e = p["errors"]
-            cells = [f"{e[m]:.2e}" if m in e else "" for m in ("esr", "rms", "aim", "psf", "sim")]
-            t.add_row(p["knob"], p["setting"], *cells, f"{p['time_s']:.4f}", p["note"])
-        console.print(t)
+            cells = [f"{e[m]:.2e}" if m in e else "" for m, _ in metrics]
+            t.add_row(p["knob"], p["setting"], *cells, f"{p['time_s']:.4f}", *([p["note"]] if notes else []))
+        show(console, t)
     analyses = [p for p in d["points"] if p["knob"] in ANALYSIS_KNOBS]
     if analyses:
         _render_analyses(analyses, d["reference"].get("analyses", {}))

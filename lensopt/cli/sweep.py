@@ -16,6 +16,7 @@ from rich.table import Table
 
 from lensopt.cli.common import JsonOpt, SeedOpt, check_scheduler, console, err_console, handle_errors, print_json
 from lensopt.cli.signals import report_signal, signal_word, state
+from lensopt.cli.tables import compact_table, show
 from lensopt.errors import LensoptError
 
 if TYPE_CHECKING:
@@ -117,21 +118,24 @@ class SweepProgress:
 
 
 def render_table(console: Console, result: SweepResult, outdir: Path) -> None:
-    """The final table: one row per point."""
-    t = Table(title="best of starts per point", header_style="bold")
+    """The final table: one row per point; then the files that are on disk (named, after they are written)."""
     keys = result.keys
-    cols = ["point", *keys, "ESR µm", "merit", "start", "steps", "stop", "finished", "failed", "wall s"]
-    for c in cols:
-        t.add_column(c, justify="right")
+    heads = [k.replace(".", ".\n") if len(k) > 12 else k for k in keys]  # long dotted keys wrap at the dots
+    cols = ["point", *heads, "ESR µm", "merit", "best\nstart", "steps", "stop", "starts\nok/failed", "wall s"]
+    t = compact_table("best of starts per point", [(c, "left" if c == "stop" else "right") for c in cols])
     for r in result.rows:
         t.add_row(str(r["point"]), *[_fmt(r[k]) for k in keys], _fmt(r["best_esr_um"]),
-                  "—" if r["best_merit"] is None else f"{r['best_merit']:.6e}", _fmt(r["best_start"]),
-                  _fmt(r["best_steps"]), _fmt(r["best_stop_reason"]), str(r["starts_finished"]),
-                  str(r["starts_failed"]), f"{r['wall_s']:.1f}")
-    console.print(t)
+                  "—" if r["best_merit"] is None else f"{r['best_merit']:.4e}", _fmt(r["best_start"]),
+                  _fmt(r["best_steps"]), _fmt(r["best_stop_reason"]),
+                  f"{r['starts_finished']}/{r['starts_failed']}", f"{r['wall_s']:.1f}")
+    show(console, t, wrap=("stop",))
+    best = [f"best_{r['point']}.json" for r in result.rows if r["best_start"] is not None]
+    names = ["sweep.json", "sweep.csv", *best, "sweep.png"]
+    written = [n for n in names if (outdir / n).is_file()]
+    if len(written) > 6:
+        written = [*written[:3], f"… ({len(written) - 5} more)", *written[-2:]]
     console.print(f"{result.computed} task(s) run, {result.skipped} found in {outdir}, {result.elapsed_s:.1f} s; "
-                  f"wrote {outdir}/sweep.json, sweep.csv, best_<i>.json" + ("" if result.interrupted else
-                                                                              ", sweep.png"), highlight=False)
+                  f"in {outdir}: " + (", ".join(written) or "nothing written"), highlight=False)
     reasons = sorted({rec["reason"] for rec in result.records.values() if rec.get("status") == "failed"})
     for why in reasons[:5]:
         console.print(f"[yellow]failed start:[/] {why}", highlight=False)
@@ -154,13 +158,15 @@ def sweep(
                                            "the scaled variables for starts ≥ 1.")] = 0.05,
     steps: Annotated[int | None, typer.Option("--steps", min=1, help="Optimizer steps (default: the "
                                               "spec's).")] = None,
-    scheduler: Annotated[str, typer.Option("--scheduler", help="local (a Dask LocalCluster of --workers "
-                                           "processes), serial, or a Dask scheduler address.")] = "local",
+    scheduler: Annotated[str, typer.Option("--scheduler", help="auto (serial unless the tasks left after "
+                                           "the first are estimated at 30 s or more and 2+ cores are free: "
+                                           "then a LocalCluster), local (a Dask LocalCluster of --workers "
+                                           "processes), serial, or a Dask scheduler address.")] = "auto",
     workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="LocalCluster workers.")] = 2,
     restart: Annotated[bool, typer.Option("--restart", help="Start over in a folder that holds another "
                                           "sweep (its files are removed).")] = False,
     esr_sampling: Annotated[str, typer.Option("--esr-sampling", help="Pupil sampling of the reported ESR.")]
-    = "rings:24",
+    = "gauss:16",
     seed: SeedOpt = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress display.")] = False,
     as_json: JsonOpt = False,
@@ -178,13 +184,15 @@ def sweep(
         text = spec.read_text(encoding="utf-8")
     except OSError as err:
         raise LensoptError(f"cannot read the file: {err.strerror}", path=str(spec)) from None
-    PupilSampling.parse(esr_sampling, seed=seed, path="--esr-sampling")
+    PupilSampling.parse(esr_sampling, seed=seed, path="--esr-sampling", weighted=True)
     varies = [parse_vary(v) for v in vary]
     points = expand_grid(base, varies)
     settings = Settings(starts=starts, sigma=perturb, steps=steps, seed=seed, esr_sampling=esr_sampling)
     with SweepProgress(err_console, points, starts, enabled=not quiet) as progress:
         result = run_sweep(base, text, varies, settings, output, scheduler=sched, workers=workers,
-                           restart=restart, spec_name=base.name or spec.name, callback=progress, points=points)
+                           restart=restart, spec_name=base.name or spec.name, callback=progress, points=points,
+                           on_plan=None if quiet or as_json else lambda why: err_console.print(
+                               f"sweep: the tasks run {why}", highlight=False))
     if as_json:
         print_json({"output": str(output), "complete": result.complete, "interrupted": result.interrupted,
                     "computed": result.computed, "skipped": result.skipped, "elapsed_s": result.elapsed_s,

@@ -12,6 +12,7 @@ import typer
 from rich.table import Table
 
 from lensopt.cli.common import JsonOpt, LensArg, check_seed, console, handle_errors, load_model, print_json
+from lensopt.cli.tables import compact_table, show
 from lensopt.errors import LensoptError
 
 __all__ = ["commands", "parse_fields", "tolerance_report"]
@@ -44,8 +45,10 @@ def tolerance_cmd(
                                             "its own (decentered) stop centre.")] = None,
     compensator: Annotated[str | None, typer.Option("--compensator", help="focus | lm | none (lm: "
                                                     "the spec's variables by a few LM steps).")] = None,
-    scheduler: Annotated[str, typer.Option("--scheduler", help="local (a 2-worker Dask LocalCluster), "
-                                           "serial, or a Dask scheduler address.")] = "local",
+    scheduler: Annotated[str, typer.Option("--scheduler", help="auto (serial unless the trials left after "
+                                           "the first chunk are estimated at 30 s or more and 2+ cores are "
+                                           "free: then a LocalCluster), local (a Dask LocalCluster of "
+                                           "--workers), serial, or a Dask scheduler address.")] = "auto",
     workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="LocalCluster workers.")] = 2,
     output_dir: Annotated[Path | None, typer.Option("--output-dir", "-o", help="Folder for plots (CDF, "
                                                     "histogram, sensitivity) and the worst trials.")] = None,
@@ -161,12 +164,15 @@ def tolerance_report(model: Any, settings: Any, *, scheduler: str | None, worker
         report["rss"] = rss_prediction(rows, job.tols, m0, higher_is_better=HIGHER_IS_BETTER[job.metric])
     if settings.trials > 0:
         start = time.perf_counter()
-        mc = monte_carlo(job, settings.trials, settings.seed, scheduler=scheduler, workers=workers)
+        plan: list[str] = []
+        mc = monte_carlo(job, settings.trials, settings.seed, scheduler=scheduler, workers=workers,
+                         on_plan=plan.append)
         elapsed = time.perf_counter() - start
         per = {k: _describe(v) for k, v in mc.metrics.items() if v.ndim == 1 and k != "compensator_ok"}
         report["monte_carlo"] = {"trials": mc.num_trials, "seconds": elapsed,
                                  "seconds_per_trial": elapsed / mc.num_trials,
-                                 "scheduler": scheduler or "serial", "stats": mc.stats, "yields": mc.yields,
+                                 "scheduler": plan[-1] if plan else scheduler or "serial", "stats": mc.stats,
+                                 "yields": mc.yields,
                                  "metrics": per}
         if out_dir is not None:
             out_dir.mkdir(parents=True, exist_ok=True)
@@ -227,21 +233,24 @@ def _plots(out_dir: Path, report: dict[str, Any], mc: Any, rows: list[Any], metr
     report["plots"] = [str(out_dir / f) for f in files]
 
 
-def _render(r: dict[str, Any], top: int = 15) -> None:
+def _render(r: dict[str, Any]) -> None:
+    """The report as tables: every sensitivity row (most harmful first), RSS, Monte Carlo, yields."""
     unit = r["unit"]
     console.print(f"[bold]{r['lens']}[/] — metric {r['metric']} {unit}, compensator {r['compensator']}, "
                   f"sampling {r['sampling']}, {len(r['fields'])} fields, aim {r['aim']}; "
                   f"nominal {r['nominal']['value']:.4f} "
                   f"(focus shift {r['nominal']['focus_shift_mm'] * 1e3:+.1f} µm), {len(r['tolerances'])} tolerances")
     if "sensitivity" in r:
-        t = Table(title=f"Sensitivity (Δ {r['metric']} at ∓limit), inverse for Δ = {r['inverse_target']:.4g}")
-        for col in ("tolerance", "limit", "Δ at −", "Δ at +", "inverse ±", "focus ± (µm)"):
-            t.add_column(col, justify="right" if col != "tolerance" else "left")
-        for s in r["sensitivity"][:top]:
+        rows = r["sensitivity"]
+        t = compact_table(f"Sensitivity of {r['metric']} at ∓limit, all {len(rows)} tolerances, most harmful first; "
+                          f"inverse: the ± that changes it by {r['inverse_target']:.4g}",
+                          [("tolerance", "left"), ("limit", "right"), ("Δ at −", "right"), ("Δ at +", "right"),
+                           ("inverse ±", "right"), ("focus ± (µm)", "right")])
+        for s in rows:
             t.add_row(s["name"], f"{s['limit']:g}", f"{s['minus']:+.4f}", f"{s['plus']:+.4f}",
                       "∞" if math.isinf(s["inverse"]) else f"{s['inverse']:.4g}",
                       f"{s['focus_minus_mm'] * 1e3:+.1f}/{s['focus_plus_mm'] * 1e3:+.1f}")
-        console.print(t)
+        show(console, t)
         rss = r["rss"]
         at = "≥" if r["higher_is_better"] else "≤"
         console.print(f"RSS prediction: mean {rss['mean']:.4f}, std {rss['std']:.4f}, 90 % {at} {rss['p90']:.4f}; "
@@ -249,8 +258,8 @@ def _render(r: dict[str, Any], top: int = 15) -> None:
     if "monte_carlo" in r:
         mc = r["monte_carlo"]
         st = mc["stats"]
-        console.print(f"Monte Carlo: {mc['trials']} trials ({mc['scheduler']}), {mc['seconds_per_trial']:.4f} s/trial "
-                      f"(wall time, cluster start included); "
+        console.print(f"Monte Carlo: {mc['trials']} trials, {mc['scheduler']}; {mc['seconds_per_trial']:.4f} s/trial "
+                      f"(wall time, a cluster's start included); "
                       f"mean {st['mean']:.4f}, std {st['std']:.4f}, min {st['min']:.4f}, max {st['max']:.4f}; "
                       f"trials with failed rays {st['trials_with_failed_rays']}, "
                       f"compensator failures {st['compensator_failures']}")

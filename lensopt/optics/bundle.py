@@ -129,6 +129,8 @@ class Bundle:
             to the paraxial entrance pupil, or None for the plain unit disc.
         pupil_aim: full-aiming result (mode ``full``), or None.
         shape: the pupil shape the rays were launched with (``pupil_shape``), or None.
+        pupil_weights: (P,) pupil-area weight of each sample (a quadrature such as ``gauss:N``), read by
+            the spot statistics and the relative illumination; None: equal weights.
     """
 
     first_order: FirstOrder
@@ -142,6 +144,7 @@ class Bundle:
     vignetting: Tensor | None = None
     pupil_aim: PupilAim | None = None
     shape: PupilShape | None = None
+    pupil_weights: Tensor | None = None
 
 
 def trace_bundle(
@@ -160,6 +163,7 @@ def trace_bundle(
     rel_field_x: Tensor | None = None,
     backend: str | None = None,
     solved: PupilShape | None = None,
+    pupil_weights: Tensor | None = None,
 ) -> Bundle:
     """Trace pupil points ``pupil`` ((P, 2) or (F, W, P, 2)) for every field and wavelength.
 
@@ -179,6 +183,9 @@ def trace_bundle(
         backend: ``auto``, ``eager`` or ``compiled`` (``optics.backend``); default: ``use_backend``'s.
         solved: the pupil shape of an earlier bundle on the same lens values and fields
             (``Bundle.shape``), whose detached aiming solves are reused (``pupil_shape``).
+        pupil_weights: (P,) pupil-area weights of the samples (``PupilSampling.weights``); None: equal.
+            Aiming, vignetting factors and the front aperture map the pupil affinely, which scales
+            every weight alike, so the weights hold for the launched pupil too.
 
     A lens with a placement (decentered or tilted surfaces) has no mirror symmetry: a half-pupil
     sampling is mirrored to the full pupil here and ``half_pupil`` becomes False, so centroids are
@@ -186,7 +193,7 @@ def trace_bundle(
     """
     start = launch_bundle(lens, system, pupil, half_pupil=half_pupil, rel_field=rel_field, aim=aim, fo=fo,
                           vignetting=vignetting, aim_steps=aim_steps, shape=shape, rel_field_x=rel_field_x,
-                          solved=solved)
+                          solved=solved, pupil_weights=pupil_weights)
     return finish_bundle(system, start, trace_with(lens, start.rays, record=record, backend=backend))
 
 
@@ -205,6 +212,7 @@ class Launch:
     rays: Rays
     shape: PupilShape
     half_pupil: bool
+    pupil_weights: Tensor | None = None
 
 
 def launch_bundle(
@@ -221,6 +229,7 @@ def launch_bundle(
     shape: PupilShape | None = None,
     rel_field_x: Tensor | None = None,
     solved: PupilShape | None = None,
+    pupil_weights: Tensor | None = None,
 ) -> Launch:
     """The first half of ``trace_bundle`` (same arguments): first-order data, pupil shape, launched rays."""
     fo = first_order(lens, system) if fo is None else fo
@@ -234,9 +243,15 @@ def launch_bundle(
             raise ValueError("two-dimensional fields (rel_field_x) are traced with aim = none or chief")
         tan_x = field_tangents(lens, system, rel_field_x.to(lens.dtype))
     pupil = pupil.to(dtype=lens.dtype, device=lens.device)
+    if pupil_weights is not None:
+        pupil_weights = pupil_weights.to(dtype=lens.dtype, device=lens.device)
+        if pupil_weights.shape != pupil.shape[-2:-1]:
+            raise ValueError(f"pupil_weights must have shape ({pupil.shape[-2]},), got {tuple(pupil_weights.shape)}")
     if lens.placement is not None and half_pupil:  # no symmetry: the mirrored half too
         pupil = torch.cat([pupil, pupil * torch.tensor([-1.0, 1.0], dtype=pupil.dtype, device=pupil.device)], -2)
         half_pupil = False
+        if pupil_weights is not None:
+            pupil_weights = torch.cat([pupil_weights, pupil_weights])
     if pupil.dim() == 2:
         pupil = pupil.expand(rel_field.shape[0], lens.wavelength_um.shape[0], *pupil.shape)
     rays_n = pupil.numel() // 2
@@ -255,7 +270,7 @@ def launch_bundle(
         shift = torch.stack([shape.chief.offset_x, torch.zeros_like(shape.chief.offset_x)], -1)
         pupil = pupil + shift[:, :, None]
     rays = launch(lens, system, pupil, tan, epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z, tan_field_x=tan_x)
-    return Launch(fo, rel_field, tan, pupil, rays, shape, half_pupil)
+    return Launch(fo, rel_field, tan, pupil, rays, shape, half_pupil, pupil_weights)
 
 
 def finish_bundle(system: System, start: Launch, result: RayTrace) -> Bundle:
@@ -272,4 +287,4 @@ def finish_bundle(system: System, start: Launch, result: RayTrace) -> Bundle:
         status = torch.where(out, torch.full_like(result.status, int(Status.BLOCKED)), result.status)
         result = dataclasses.replace(result, status=status)
     return Bundle(start.first_order, start.rel_field, start.tan_field, start.pupil, rays, result, shape.chief,
-                  start.half_pupil, shape.factors, shape.full, shape)
+                  start.half_pupil, shape.factors, shape.full, shape, start.pupil_weights)

@@ -52,4 +52,5 @@ def head(bundle: Bundle, n: int) -> Bundle:
                       hits=hits, failed_at=None if res.failed_at is None else cut(res.failed_at))
     rays = replace(bundle.rays, pos=bundle.rays.pos[..., :n, :] if bundle.rays.pos.shape[-2] > 1 else bundle.rays.pos,
                    dir=bundle.rays.dir[..., :n, :] if bundle.rays.dir.shape[-2] > 1 else bundle.rays.dir)
-    return replace(bundle, pupil=bundle.pupil[..., :n, :], rays=rays, result=result)
+    weights = None if bundle.pupil_weights is None else bundle.pupil_weights[:n]
+    return replace(bundle, pupil=bundle.pupil[..., :n, :], rays=rays, result=result, pupil_weights=weights)

@@ -3,6 +3,7 @@ summary and the benchmark records): the measured quantities, not the residuals."
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -32,7 +33,8 @@ def _deg(cos2: torch.Tensor) -> float:
 
 def constraint_report(problem: Problem, theta: torch.Tensor, sampling: PupilSampling | None = None) -> dict[str, Any]:
     """Measured constraint quantities of θ (valid rays only), on the optimization rays or on
-    ``sampling`` (e.g. ``rings:24``, as ``lensopt trace`` samples).
+    ``sampling`` (e.g. ``gauss:16``, as ``lensopt trace`` samples; its quadrature weights weigh the spot,
+    distortion and illumination, the rim rays only enter the geometric constraints).
 
     Returns a dict with ``gaps`` (per gap: kind, centre thickness, min/max axial ray path t_z, bounds,
     satisfied), ``max_angle_deg`` (incidence/refraction over all interfaces), ``max_normal_deg``,
@@ -53,6 +55,8 @@ def constraint_report(problem: Problem, theta: torch.Tensor, sampling: PupilSamp
                                   half_pupil=sampling.half, record=True)
         valid = bundle.result.valid
         spot = head(bundle, n_spot)
+        if sampling is not None and sampling.weights(dtype=lens.dtype) is not None:  # a quadrature (gauss:N)
+            spot = dataclasses.replace(spot, pupil_weights=sampling.weights(dtype=lens.dtype))
         stats = spot_stats(spot, problem.system.wavelength_weights, problem.field_weights)
         tz = gap_lengths(bundle)
         big = torch.tensor(BIG, dtype=tz.dtype)

@@ -11,6 +11,8 @@ knob          settings                                    error (against)
 rings         ``rings:N`` (jittered), N = 4 … 64          ESR and worst-field RMS spot radius, relative
 rings_fixed   ``rings:N:nojitter``                        (the quadrature reference below)
 grid          ``grid:N``, N = 8 … 96
+gauss         ``gauss:N`` (the quadrature below as a
+              sampling, with its weights), N = 4 … 24
 float32       ``rings:N`` traced in float32
 compiled      ``rings:N`` on the compiled trace
 aim_steps     full aiming with 1 … 4 Newton steps         ESR relative to full aiming with 12 steps (on
@@ -60,7 +62,8 @@ __all__ = ["KNOBS", "DEFAULT_KNOBS", "Point", "AccuracyResult", "run_accuracy", 
 REF_TOL = 1e-9
 SPOT_N = (4, 6, 8, 12, 16, 24, 32, 48, 64)
 KNOBS = {
-    "rings": "esr", "rings_fixed": "esr", "grid": "esr", "float32": "esr", "compiled": "esr", "aim_steps": "aim",
+    "rings": "esr", "rings_fixed": "esr", "grid": "esr", "gauss": "esr", "float32": "esr", "compiled": "esr",
+    "aim_steps": "aim",
     "psf_rings": "psf", "psf_kernel": "psf", "psf_bins": "psf", "diffraction": "psf",
     "sim_grid": "sim", "sim_overlap": "sim",
     "wavefront": "wfe", "zernike": "zernike", "strehl": "strehl", "seidel": "seidel", "field_curves": "field",
@@ -71,7 +74,7 @@ KNOBS = {
 ``psf`` (NRMSE), ``sim`` (image RMSE); the analyses' metrics are in ``qa.accuracy_analyses``."""
 ANALYSES = ("wavefront", "zernike", "strehl", "seidel", "field_curves", "focal_shift", "encircled",
             "encircled_diffraction", "mtf_field", "through_focus")
-DEFAULT_KNOBS = ("rings", "rings_fixed", "grid", "float32", "compiled", "aim_steps", "psf_rings", "psf_kernel",
+DEFAULT_KNOBS = ("rings", "rings_fixed", "grid", "gauss", "float32", "compiled", "aim_steps", "psf_rings", "psf_kernel",
                  "psf_bins", "diffraction", "sim_grid", "sim_overlap", *ANALYSES)
 METRICS = {"esr": "ESR relative error", "rms": "worst-field RMS relative error",
            "aim": "ESR relative error of full aiming", "psf": "PSF NRMSE",
@@ -197,19 +200,21 @@ def _spot_points(model: Model, knob: str, ref: dict[str, Any], repeats: int) -> 
     out = []
     samplings = {"rings": [f"rings:{n}" for n in SPOT_N], "rings_fixed": [f"rings:{n}:nojitter" for n in SPOT_N],
                  "grid": [f"grid:{n}" for n in (8, 12, 16, 24, 32, 48, 64, 96)],
+                 "gauss": [f"gauss:{n}" for n in (4, 6, 8, 10, 12, 16, 24)],
                  "float32": [f"rings:{n}" for n in SPOT_N], "compiled": [f"rings:{n}" for n in SPOT_N]}[knob]
     work = lens
     if knob == "float32":
         work = _cast(lens, torch.float32)
     backend = "compiled" if knob == "compiled" else "eager"
     for text in samplings:
-        ps = PupilSampling.parse(text)
+        ps = PupilSampling.parse(text, weighted=True)
 
         def run(ps: PupilSampling = ps) -> tuple[Tensor, Tensor]:
             with torch.no_grad(), use_backend(backend):
                 pts = ps.points(dtype=work.dtype)
+                wts = ps.weights(dtype=work.dtype)
                 b = trace_bundle(work, system, pts, half_pupil=ps.half)
-                return weighted_spot(b, torch.ones(pts.shape[0], dtype=work.dtype),
+                return weighted_spot(b, torch.ones(pts.shape[0], dtype=work.dtype) if wts is None else wts,
                                      system.wavelength_weights.to(work.dtype), fw)
 
         if backend == "compiled":

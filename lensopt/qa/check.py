@@ -8,7 +8,7 @@ declares — and compared with a baseline JSON, each metric against an absolute 
 
 Baseline file (``lenses/check_baseline.json``)::
 
-    {"lensopt_check": 1, "settings": {"sampling": "rings:16", "seed": 0, "backend": "eager"},
+    {"lensopt_check": 1, "settings": {"sampling": "gauss:16", "seed": 0, "backend": "eager"},
      "lenses": {"cooke_triplet_opt.json": {"name": ..., "identity": {...}, "metrics": {"efl_mm": 50.0, ...}}}}
 
 Lenses are keyed by file name; ``identity`` (name, surfaces, wavelengths, fields) tells a baseline of
@@ -42,7 +42,7 @@ FORMAT = 1
 class CheckSettings:
     """How the metrics are measured (recorded in the baseline, reused from it)."""
 
-    sampling: str = "rings:16"
+    sampling: str = "gauss:16"
     seed: int = 0
     backend: str = "eager"
 
@@ -87,7 +87,7 @@ def measure(spec: LensSpec, settings: CheckSettings) -> dict[str, float]:
     """Every metric of one lens, with ``settings`` (floats; counts as floats too)."""
     from lensopt.analysis.report import trace_report
 
-    sampling = PupilSampling.parse(settings.sampling, seed=settings.seed, path="settings.sampling")
+    sampling = PupilSampling.parse(settings.sampling, seed=settings.seed, path="settings.sampling", weighted=True)
     with use_backend(settings.backend):
         rep = trace_report(build(spec), sampling)
         out: dict[str, float] = {}

@@ -153,6 +153,23 @@ def _kinds(union: Any) -> str:
     return ", ".join(typing.get_args(m.model_fields["type"].annotation)[0] for m in members)
 
 
+def _other_kind_hint(loc: tuple[Any, ...], name: str) -> str | None:
+    """For a field that another surface type has (``conic`` on a sphere): say so and which types to use."""
+    if len(loc) < 2 or loc[-2] not in ("plane", "sphere", "conic", "asphere", "diffractive"):
+        return None
+    kind = str(loc[-2])
+    members = {typing.get_args(m.model_fields["type"].annotation)[0]: m
+               for m in typing.get_args(typing.get_args(models.BaseShape)[0])}
+    members["diffractive"] = models.DiffractiveSurface
+    have = [k for k, m in members.items() if name in m.model_fields]
+    if not have:
+        return None
+    what = "base" if len(loc) >= 3 and loc[-3] == "base" else "surface"
+    quoted = [f'"{k}"' for k in have]
+    kinds = quoted[0] if len(quoted) == 1 else ", ".join(quoted[:-1]) + " or " + quoted[-1]
+    return f"a {kind} {what} has no {name}; set type = {kinds} to give it one"
+
+
 def _field_names() -> list[str]:
     names: set[str] = set()
     for obj in vars(models).values():
@@ -216,8 +233,10 @@ def _to_spec_error(err: ValidationError) -> SpecError:
         n = first["ctx"]["min_length"]
         msg, got = f"needs at least {n} entr{'y' if n == 1 else 'ies'}", ...
     elif kind == "extra_forbidden":
-        close = difflib.get_close_matches(loc.rsplit(".", 1)[-1], _field_names(), n=1)
-        msg = "unknown field" + (f"; did you mean {close[0]!r}?" if close else "")
+        name = loc.rsplit(".", 1)[-1]
+        hint = _other_kind_hint(tuple(first["loc"]), name)
+        close = difflib.get_close_matches(name, _field_names(), n=1)
+        msg = hint or "unknown field" + (f"; did you mean {close[0]!r}?" if close else "")
     if first["loc"] and first["loc"][-1] == "[key]":  # a dict key that is not a power
         loc = format_loc(tuple(first["loc"][:-2]))
         msg, got = "keys must be even integer powers, e.g. 4, 6, 8", first["loc"][-2]

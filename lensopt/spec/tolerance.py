@@ -59,7 +59,7 @@ class ToleranceSpec(_Model):
     profile: Literal["s6.2"] | None = None
     items: list[ToleranceItemSpec] = Field(default_factory=list)
     distribution: _Dist = "uniform"
-    trials: int = Field(default=100, ge=1, le=1_000_000)
+    trials: int = Field(default=100, ge=0, le=1_000_000)  # 0: the sensitivity table alone (--trials 0)
     seed: int = 0
     compensator: Literal["none", "focus", "lm"] = "focus"
     lm_steps: int = Field(default=5, ge=1, le=100)

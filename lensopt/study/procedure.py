@@ -188,7 +188,7 @@ def run_procedure(spec: LensSpec, spec_text: str, settings: ProcedureSettings, o
 
     Args:
         spec_text: the spec file's text (for the manifest hash).
-        scheduler: None (serial), ``local`` or a Dask scheduler address.
+        scheduler: None (serial), ``auto`` (``lensopt.parallel``), ``local`` or a Dask scheduler address.
     """
     t0 = time.perf_counter()
     _check(settings)

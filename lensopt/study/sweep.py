@@ -59,7 +59,7 @@ class Settings:
         floor: the scale of variables that start at (or near) zero: σ·max(|θ0ᵢ|, floor).
         steps: optimizer steps (None: the spec's ``optimize.steps``).
         seed: pupil jitter seed of ``optimize`` and first word of the perturbation seed.
-        esr_sampling: pupil sampling of the reported ESR (``lensopt optimize`` reports rings:24).
+        esr_sampling: pupil sampling of the reported ESR (``lensopt optimize`` reports gauss:16).
     """
 
     starts: int = 1
@@ -67,7 +67,7 @@ class Settings:
     floor: float = 0.1
     steps: int | None = None
     seed: int = 0
-    esr_sampling: str = "rings:24"
+    esr_sampling: str = "gauss:16"
 
 
 @dataclass(frozen=True)
@@ -239,7 +239,7 @@ def _report_esr(spec: LensSpec, settings: Settings) -> float | None:
     from lensopt.optics.sampling import PupilSampling
     from lensopt.spec.build import build
 
-    rep = trace_report(build(spec), PupilSampling.parse(settings.esr_sampling, seed=settings.seed))
+    rep = trace_report(build(spec), PupilSampling.parse(settings.esr_sampling, seed=settings.seed, weighted=True))
     return rep["effective_spot_radius_um"]
 
 
@@ -387,13 +387,14 @@ def _is_num(v: Any) -> bool:
 def run_sweep(spec: LensSpec, spec_text: str, varies: Sequence[Vary], settings: Settings, outdir: Path, *,
               scheduler: str | None = None, workers: int = 2, restart: bool = False, spec_name: str = "",
               callback: Callable[[SweepEvent], None] | None = None, plot: bool = True,
-              points: list[Point] | None = None) -> SweepResult:
+              points: list[Point] | None = None, on_plan: Callable[[str], None] | None = None) -> SweepResult:
     """Run (or resume) a sweep into ``outdir`` and write its outputs.
 
     Args:
         spec_text: the spec file's text (for the manifest hash).
-        scheduler: None (serial), ``local`` or a Dask scheduler address (``lensopt.parallel``).
+        scheduler: None (serial), ``auto``, ``local`` or a Dask scheduler address (``lensopt.parallel``).
         points: the grid if already expanded (``expand_grid``).
+        on_plan: told in words how the tasks run (what ``auto`` chose and why).
 
     A KeyboardInterrupt (Ctrl-C) stops the run: the finished tasks stay on disk, the table of what
     finished is written (no plot) and the result says ``interrupted``.
@@ -431,7 +432,8 @@ def run_sweep(spec: LensSpec, spec_text: str, varies: Sequence[Vary], settings: 
             callback(SweepEvent("done", t.point, t.start, record))
 
     try:
-        run_tasks(run_task, todo, shared=settings, scheduler=scheduler, workers=workers, on_done=done)
+        run_tasks(run_task, todo, shared=settings, scheduler=scheduler, workers=workers, on_done=done,
+                  on_plan=on_plan)
     except KeyboardInterrupt:
         result.interrupted = True
     result.rows = table(points, records, settings.starts)

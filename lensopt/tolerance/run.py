@@ -9,6 +9,7 @@ existing scheduler) and put back in trial order, so serial and distributed runs 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -118,15 +119,18 @@ def _chunk_psnr(job: Job, values: Tensor, res: dict[str, np.ndarray]) -> dict[st
     return trial_psnr(job.psnr, lenses)
 
 
-def run_trials(job: Job, values: Tensor, *, scheduler: str | None = None, workers: int = 2) -> dict[str, np.ndarray]:
+def run_trials(job: Job, values: Tensor, *, scheduler: str | None = None, workers: int = 2,
+               on_plan: Callable[[str], None] | None = None) -> dict[str, np.ndarray]:
     """Metrics of the trials in ``values`` ((K, T)), chunk by chunk.
 
     Args:
-        scheduler: None (serial, in this process), ``local`` (a fresh Dask LocalCluster with
+        scheduler: None (serial, in this process), ``auto`` (serial unless the chunks left after the
+            first are worth a cluster, ``lensopt.parallel``), ``local`` (a fresh Dask LocalCluster with
             ``workers`` single-threaded worker processes) or a scheduler address (``tcp://…``).
+        on_plan: told in words how the chunks run.
     """
     chunks = [values[i:i + job.chunk] for i in range(0, values.shape[0], job.chunk)]
-    parts = run_tasks(_chunk_eval, chunks, shared=job, scheduler=scheduler, workers=workers)
+    parts = run_tasks(_chunk_eval, chunks, shared=job, scheduler=scheduler, workers=workers, on_plan=on_plan)
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
@@ -310,10 +314,11 @@ def yield_table(scalar: np.ndarray, *, higher_is_better: bool, levels: tuple[flo
 
 
 def monte_carlo(job: Job, num_trials: int, seed: int, *, scheduler: str | None = None,
-                workers: int = 2) -> MonteCarlo:
-    """``num_trials`` random lenses drawn from the tolerances with ``seed``, evaluated in chunks."""
+                workers: int = 2, on_plan: Callable[[str], None] | None = None) -> MonteCarlo:
+    """``num_trials`` random lenses drawn from the tolerances with ``seed``, evaluated in chunks
+    (``run_trials``)."""
     values = draw(list(job.tols), num_trials, seed)
-    out = run_trials(job, values, scheduler=scheduler, workers=workers)
+    out = run_trials(job, values, scheduler=scheduler, workers=workers, on_plan=on_plan)
     s = scalar_metric(out, job.metric)
     finite = s[np.isfinite(s)]
     stats = {"mean": float(finite.mean()) if finite.size else math.inf,

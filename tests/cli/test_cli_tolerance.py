@@ -68,3 +68,21 @@ def test_trace_json_mtf_and_plot_mtf(tmp_path: Path) -> None:
     assert png.read_bytes()[:8] == PNG_MAGIC
     r = runner.invoke(app, ["trace", str(COOKE), "--mtf", "ten"])
     assert r.exit_code == 2 and "--mtf" in r.output
+
+
+def test_tolerance_table_shows_every_sensitivity_row(tmp_path: Path) -> None:
+    # Issue 29: the table showed 15 of the 24 rows of S6.2 without a word. Every tolerance has its row,
+    # and the title says how many there are.
+    r = runner.invoke(app, ["tolerance", str(CMOUNT), "--profile", "s6.2", "--sampling", "rings:3", "--trials", "0"])
+    assert r.exit_code == 0, r.output
+    rep = json.loads(runner.invoke(app, ["tolerance", str(CMOUNT), "--profile", "s6.2", "--sampling", "rings:3",
+                                         "--trials", "0", "--json"]).stdout)
+    names = [s["name"] for s in rep["sensitivity"]]
+    assert len(names) == 24
+    lines = r.stdout.splitlines()
+    assert any("all 24 tolerances" in line for line in lines)
+    for name in names:  # one row each, in the order of the report (most harmful first)
+        assert sum(line.startswith(name + " ") for line in lines) == 1, name
+    rows = [line.split()[0] + " " + line.split()[1] for line in lines if line.split()[:2] and
+            " ".join(line.split()[:2]) in names]
+    assert rows == names

@@ -241,18 +241,19 @@ def test_dead_lens_is_null_and_dash_never_zero(tmp_path: Path) -> None:
 
 
 def test_ray_after_a_failure_prints_no_numbers(tmp_path: Path) -> None:
-    code, out, _ = run("ray", COOKE, "--pupil", "0", "3", "--json")
+    # A pupil past the edge is refused (px² + py² ≤ 1); a 60° field fails by total internal reflection.
+    code, out, _ = run("ray", COOKE, "--field", "60", "--aim", "none", "--json")
     r = json.loads(out)
-    assert code == 0 and r["status"] == "missed surface" and r["failed_at_surface"] is not None
+    assert code == 0 and r["status"] == "total internal reflection" and r["failed_at_surface"] is not None
     k = r["failed_at_surface"]
     for s in r["surfaces"]:
         if s["surface"] < k:  # before the failure: a real ray, unit direction vector
             assert abs(math.hypot(s["L"], s["M"], s["N"]) - 1) < 1e-12
-        else:
-            assert s["L"] is None and s["x"] is None
+        else:  # the failing surface keeps where the ray met it (TIR: no refracted direction), later ones nothing
+            assert s["L"] is None and (s["x"] is None) == (s["surface"] > k)
     assert all(v is None for v in r["image"].values())
-    code, out, _ = run("ray", COOKE, "--pupil", "0", "3")
-    assert f"missed surface at surface {k}" in out and "—" in out
+    code, out, _ = run("ray", COOKE, "--field", "60", "--aim", "none")
+    assert f"total internal reflection at surface {k}" in out and "—" in out
 
 
 def test_three_ray_illumination_is_nan_not_zero_when_its_rays_fail() -> None:

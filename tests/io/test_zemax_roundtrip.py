@@ -89,3 +89,17 @@ def test_round_trip_without_lensopt_notes_keeps_the_lens(path: Path) -> None:
     pos_b, ok_b = _trace(back.model_copy(update={"system": back.system.model_copy(update=plain)}))
     assert torch.equal(ok_a, ok_b)
     assert float((pos_a - pos_b)[ok_a].abs().max()) <= TOL_MM
+
+
+def test_derived_numbers_are_written_without_rounding_noise() -> None:
+    # Issue 29: relative field 0.7 of a 3° field was written YFLN 0.0 2.0999999999999996 (0.7 × 3 in binary).
+    # Derived numbers get 14 significant digits (interchange.numbers.fmt_derived); the spec's own numbers
+    # keep their shortest round-trip form.
+    spec = load_spec(ROOT / "specs" / "cooke_triplet.toml")
+    field = spec.system.field.model_copy(update={"hfov_deg": 3.0, "relative": [0.0, 0.7, 1.0]})
+    spec = spec.model_copy(update={"system": spec.system.model_copy(update={"field": field})})
+    assert 0.7 * 3.0 == 2.0999999999999996
+    lines = export_zemax(spec).splitlines()
+    assert "YFLN 0 2.1 3" in lines
+    back = import_zemax("\n".join(_no_notes("\n".join(lines)).splitlines()), source="t.zmx").spec
+    assert back.system.field.relative == pytest.approx([0.0, 0.7, 1.0], rel=1e-14, abs=0)

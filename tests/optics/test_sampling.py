@@ -95,3 +95,53 @@ def test_parse_rejects_bad_schemes(text: str) -> None:
     msg = str(info.value)
     assert msg.startswith("--sampling: ")
     assert f"(got {text!r})" in msg
+
+
+# ------------------------------------------------------------------------------------------- gauss:N
+
+
+@pytest.mark.parametrize("n", [1, 3, 16])
+def test_gauss_layout_is_legendre_radii_times_midpoint_angles(n: int) -> None:
+    import numpy as np
+
+    from lensopt.optics.sampling import pupil_gauss
+
+    pts, w = pupil_gauss(n, dtype=D)
+    assert pts.shape == (2 * n * n, 2) and w.shape == (2 * n * n,)
+    # Radii: the Gauss–Legendre nodes of [−1, 1] mapped to [0, 1] (numpy's leggauss, the definition).
+    nodes = (np.polynomial.legendre.leggauss(n)[0] + 1) / 2
+    r = torch.linalg.vector_norm(pts, dim=-1).reshape(n, 2 * n)
+    torch.testing.assert_close(r, torch.tensor(nodes, dtype=D)[:, None].expand(n, 2 * n), rtol=0, atol=1e-15)
+    # Angles from +y: the midpoints π (j + ½) / 2N of 2N equal cells on (0, π), each ring the same.
+    psi = torch.atan2(pts[:, 0], pts[:, 1]).reshape(n, 2 * n).sort(-1).values
+    expected = torch.tensor([math.pi * (j + 0.5) / (2 * n) for j in range(2 * n)], dtype=D)
+    torch.testing.assert_close(psi, expected.expand(n, 2 * n), rtol=0, atol=1e-14)
+    assert bool((pts[:, 0] > 0).all()), "the half pupil x > 0"
+    # Exact mirror pairs py → −py (what makes an on-axis centroid 0): the multiset of py is symmetric.
+    assert torch.equal(pts[:, 1].sort().values, (-pts[:, 1]).sort().values)
+    assert float(w.mean()) == pytest.approx(1.0, abs=1e-15)
+
+
+@pytest.mark.parametrize("k", [0, 1, 2, 3, 5])
+def test_gauss_weights_integrate_disc_moments_exactly(k: int) -> None:
+    # Closed form: the disc average of ρ^2k is ∫₀¹ ρ^2k 2ρ dρ = 1/(k + 1); of py² it is 1/4 (= ⟨ρ²⟩/2).
+    # gauss:N integrates ρ^2k·ρ exactly while 2k + 1 ≤ 2N − 1 (Gauss–Legendre with N nodes).
+    from lensopt.optics.sampling import pupil_gauss
+
+    pts, w = pupil_gauss(max(k + 1, 2), dtype=D)  # py² = ρ² cos²ψ needs N ≥ 2
+    rho2 = (pts**2).sum(-1)
+    assert float((w * rho2**k).mean()) == pytest.approx(1 / (k + 1), rel=1e-13)
+    assert float((w * pts[:, 1] ** 2).mean()) == pytest.approx(0.25, rel=1e-13)
+    # Equal-weight rings are not exact: rings:24 overstates ⟨ρ²⟩ (its outer ring sits on the rim).
+    rings = pupil_rings(24, jitter=False, dtype=D)
+    assert float((rings**2).sum(-1).mean()) > 0.5 * (1 + 1e-3)
+
+
+def test_gauss_is_only_parsed_where_weights_are_used() -> None:
+    s = PupilSampling.parse("gauss:16", weighted=True)
+    assert (s.kind, s.n, s.half, s.count, str(s)) == ("gauss", 16, True, 512, "gauss:16")
+    assert s.weights(dtype=D) is not None and PupilSampling.parse("rings:4").weights(dtype=D) is None
+    with pytest.raises(SpecError, match=r"^--rays: gauss:N weights its rays unequally.*\(got 'gauss:16'\)"):
+        PupilSampling.parse("gauss:16", path="--rays")
+    with pytest.raises(SpecError, match="gauss:N with N ≥ 1"):
+        PupilSampling.parse("gauss:16:nojitter", weighted=True)

@@ -10,13 +10,12 @@ which CODE V and other readers skip.
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
 from lensopt.errors import SpecError
 
-__all__ = ["Command", "SeqFile", "split_commands", "fmt_derived", "EXTRAS_PREFIX"]
+__all__ = ["Command", "SeqFile", "split_commands", "EXTRAS_PREFIX"]
 
 EXTRAS_PREFIX = "! lensopt: "
 
@@ -126,17 +125,3 @@ def split_commands(text: str, *, source: str = "seq") -> SeqFile:
         for tokens in _split_tokens(pending, start, source):
             commands.append(Command(start, tuple(tokens)))
     return SeqFile(commands, extras)
-
-
-def fmt_derived(x: float) -> str:
-    """A number computed for CODE V (unit conversions, products): 14 significant digits.
-
-    Reading it back and converting again reproduces it within a few ulp, far inside half a unit of
-    the 14th digit, so export → import → export gives the same text; 14 digits keep the lens to
-    5e-15 relative.
-    """
-    x = float(x)
-    if not math.isfinite(x):
-        raise ValueError(f"cannot write {x} to a CODE V file")
-    text = format(x, ".14g")
-    return "0" if text == "-0" else text

@@ -46,8 +46,8 @@ from lensopt import __version__
 from lensopt.errors import SpecError
 from lensopt.files import write_text_atomic
 from lensopt.interchange.codev.names import codev_glass_name, private_name
-from lensopt.interchange.codev.syntax import EXTRAS_PREFIX, fmt_derived
-from lensopt.interchange.numbers import fmt_exact
+from lensopt.interchange.codev.syntax import EXTRAS_PREFIX
+from lensopt.interchange.numbers import fmt_derived, fmt_exact
 from lensopt.materials import LINE_C_UM, LINE_D_UM, LINE_F_UM, LINE_G_UM, CatalogGlass, Material
 from lensopt.optics.paraxial import first_order
 from lensopt.spec.build import Model, build

@@ -32,7 +32,7 @@ from typing import Any
 
 from lensopt.errors import SpecError
 from lensopt.files import write_text_atomic
-from lensopt.interchange.numbers import fmt_exact
+from lensopt.interchange.numbers import fmt_derived, fmt_exact
 from lensopt.interchange.zemax.syntax import NOTE_PREFIX
 from lensopt.materials import CatalogGlass, ModelGlass
 from lensopt.materials.agf import AgfGlass
@@ -87,16 +87,18 @@ def export_zemax(spec: LensSpec) -> str:
     n_f, n_w = len(fld.relative), len(spec.spectrum.wavelengths_nm)
     body.append(f"FTYP {0 if fld.hfov_deg is not None else 2} 0 {n_f} {n_w} 0 0 0")
     body.append("XFLN " + " ".join("0" for _ in fld.relative))
-    body.append("YFLN " + " ".join(_num(u * top) for u in fld.relative))
+    body.append("YFLN " + " ".join(fmt_derived(u * top) for u in fld.relative))
     extras["field"] = {"max": top, "relative": list(fld.relative)}
     if fld.weights is not None:
         body.append("FWGN " + " ".join(_num(w) for w in fld.weights))
     vig = spec.system.vignetting
     if vig is not None:
         body.append("VDXN " + " ".join("0" for _ in fld.relative))
-        body.append("VDYN " + " ".join(_num((i - s) / 2) for s, i in zip(vig.superior, vig.inferior, strict=True)))
+        body.append("VDYN " + " ".join(fmt_derived((i - s) / 2) for s, i in zip(vig.superior, vig.inferior,
+                                                                                 strict=True)))
         body.append("VCXN " + " ".join(_num(v) for v in vig.lateral))
-        body.append("VCYN " + " ".join(_num((i + s) / 2) for s, i in zip(vig.superior, vig.inferior, strict=True)))
+        body.append("VCYN " + " ".join(fmt_derived((i + s) / 2) for s, i in zip(vig.superior, vig.inferior,
+                                                                                 strict=True)))
     weights = spec.spectrum.weights_or_uniform
     for k, (w, wt) in enumerate(zip(spec.spectrum.wavelengths_nm, weights, strict=True), start=1):
         body.append(f"WAVM {k} {_num(w * 1e-3)} {_num(wt)}")
