@@ -138,7 +138,7 @@ def main() -> None:
     args = ap.parse_args()
     if args.clock == "cpu":
         CLOCK["now"] = time.process_time
-    from lensopt.optim.run import retain_freed_memory
+    from lensopt.optim.driver import retain_freed_memory
 
     retain_freed_memory()  # as `lensopt optimize` runs
     results = {

@@ -19,7 +19,7 @@ from lm_vs_adam import problem  # noqa: E402
 
 from lensopt.optics.backend import set_backend  # noqa: E402
 from lensopt.optim import lm as lmmod  # noqa: E402
-from lensopt.optim.run import make_optimizer, retain_freed_memory  # noqa: E402
+from lensopt.optim.driver import make_optimizer, retain_freed_memory  # noqa: E402
 
 
 def main() -> None:

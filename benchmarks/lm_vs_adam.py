@@ -46,7 +46,7 @@ import torch
 from lensopt.design import build_problem
 from lensopt.optics.backend import set_backend
 from lensopt.optim import Problem
-from lensopt.optim.run import make_optimizer, retain_freed_memory
+from lensopt.optim.driver import make_optimizer, retain_freed_memory
 from lensopt.spec import load_spec
 
 SPECS = Path(__file__).resolve().parents[1] / "specs"

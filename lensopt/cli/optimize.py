@@ -19,7 +19,7 @@ from lensopt.cli.signals import report_signal, signal_word, signals_deferred, st
 from lensopt.errors import LensoptError
 
 if TYPE_CHECKING:
-    from lensopt.optim.run import OptimizeResult, Progress
+    from lensopt.optim.driver import OptimizeResult, Progress
 
 __all__ = ["LiveProgress", "commands", "plain_line", "render_summary", "summary"]
 

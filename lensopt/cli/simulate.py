@@ -264,7 +264,7 @@ def evaluate(
     options = PlanOptions(sampling=rays, kernel=kernel, grid=parse_grid(grid), seed=seed)
     hooks: list[Any] = [None]
     if irm is not None:
-        from lensopt.optim.irm_run import restoration_hook
+        from lensopt.restore.apply import restoration_hook
 
         hooks.append(restoration_hook(model, irm))
     results = []

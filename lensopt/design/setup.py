@@ -19,7 +19,7 @@ from lensopt.spec import optim as so
 from lensopt.spec.build import build, camera_of
 from lensopt.spec.models import DiffractiveSurface, LensSpec
 
-__all__ = ["SpecProblem", "build_problem", "problem_setup", "settings_of", "resolve_solves", "prepare_spec",
+__all__ = ["SpecProblem", "build_problem", "problem_setup", "settings_of", "resolve_solves", "with_varied_powers",
            "declare_variables"]
 
 #: Which plain dataclass each pydantic settings model converts to (``settings_of``).
@@ -91,7 +91,7 @@ def _base_of(surf):  # noqa: ANN001, ANN202 - spec surface → its shape part
     return surf.base if isinstance(surf, DiffractiveSurface) else surf
 
 
-def prepare_spec(spec: LensSpec) -> LensSpec:
+def with_varied_powers(spec: LensSpec) -> LensSpec:
     """Copy of ``spec`` where every varied coefficient power exists (0 where the spec has none)."""
     spec = spec.model_copy(deep=True)
     for surf in spec.surfaces:
@@ -148,7 +148,7 @@ def problem_setup(spec: LensSpec, *, dtype: torch.dtype = torch.float64,
     prepared spec it was built from (every varied coefficient power present: what θ writes back into)."""
     opt = settings_of(spec.optimize or so.OptimizeSpec())
     solves = resolve_solves(spec)
-    prepared = prepare_spec(spec)
+    prepared = with_varied_powers(spec)
     declared = declare_variables(prepared)
     model = build(prepared, dtype=dtype, device=device)
     surfaces = tuple(SurfaceInfo(glass_after=not s.is_air, plane=s.type == "plane",

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -27,6 +26,7 @@ from lensopt.analysis.psf_stack import select_wavelengths
 from lensopt.errors import LensoptError
 from lensopt.imaging.camera import Camera
 from lensopt.imaging.datasets import DeadLeaves, ImageFolder, sample_batch
+from lensopt.imaging.metrics import psnr_of_mse
 from lensopt.imaging.plan import channel_weights
 from lensopt.imaging.regions import stratified_draw, tile_grid
 from lensopt.imaging.render import (
@@ -45,12 +45,7 @@ from lensopt.optics.sampling import PupilSampling
 from lensopt.optim.gtra import GtraTarget, gtra_residual, gtra_target, psf_window
 from lensopt.optim.settings import ImageSettings
 
-__all__ = ["ImageObjective", "psnr_db"]
-
-
-def psnr_db(mse_value: float, peak: float = 1.0) -> float:
-    """PSNR of a mean squared error for signals of peak ``peak``, dB."""
-    return 10.0 * math.log10(peak**2 / mse_value) if mse_value > 0 else math.inf
+__all__ = ["ImageObjective"]
 
 
 def _seed(*parts: object) -> int:
@@ -199,7 +194,7 @@ class ImageObjective:
                 sl = slice(k, k + self.spec.batch)
                 out = self.render(spots.xy, spots, airy, images[sl], regions[sl]).clamp(0.0, 1.0)
                 total += float(((out - images[sl]) ** 2).mean((1, 2, 3)).sum())
-        return psnr_db(total / n)
+        return psnr_of_mse(total / n)
 
 
 def _centroid(spots: Spots) -> Tensor:

@@ -165,7 +165,7 @@ class Problem:
         self.failure_penalty = cons.ray_failure.penalty_mm or alpha
         self.path_spans = self._path_spans()
         self.theta0 = self.param.initial()
-        if self.objective in ("raw", "restored"):  # "restored": optim.joint replaces it with RestoredObjective
+        if self.objective in ("raw", "restored"):  # "restored": design.joint replaces it with RestoredObjective
             if setup.camera is None:
                 raise LensoptError('objective = "raw" needs a [sensor] (pixel_pitch_um and resolution)',
                                    path="sensor")
@@ -181,7 +181,7 @@ class Problem:
         self.size = max((sl.stop for sl in self.slices.values()), default=0)
 
     def use_image(self, image: ImageObjective | Any) -> None:
-        """Make ``image`` the image objective (``optim.joint`` puts its ``RestoredObjective`` here)."""
+        """Make ``image`` the image objective (``design.joint`` puts its ``RestoredObjective`` here)."""
         self.image = image
         self.term_setup = dataclasses.replace(self.term_setup, image=image)
 

@@ -1,6 +1,6 @@
 """A tolerance ``Job`` from a traced lens, its system and media, and ``[tolerance]``-like settings (any
 object with the ``ToleranceSpec`` attributes; this layer does not import the spec package —
-``lensopt.spec.tolerance_build`` ties a built spec to it and writes trials back as specs).
+``lensopt.design.tolerance`` ties a built spec to it and writes trials back as specs).
 
 ``tolerances_for`` expands the settings' items (kind, limit, surfaces or elements, distribution)
 against the lens: default targets are every surface a kind applies to.
@@ -19,8 +19,8 @@ from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.sampling import PupilSampling
 from lensopt.tolerance.evaluate import EvalSetup
+from lensopt.tolerance.job import Job
 from lensopt.tolerance.model import KINDS, Tolerance, elements_of, glass_gaps, nominal_params, s62_profile
-from lensopt.tolerance.run import Job
 
 __all__ = ["tolerances_for", "make_job", "semi_apertures", "d_line_indices", "field_points"]
 

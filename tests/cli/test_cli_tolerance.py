@@ -12,10 +12,10 @@ from typer.testing import CliRunner
 
 from lensopt.analysis.mtf import lens_mtf
 from lensopt.cli.app import app
+from lensopt.design.tolerance import tolerance_job
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
-from lensopt.spec.tolerance_build import make_job
-from lensopt.tolerance.run import monte_carlo
+from lensopt.tolerance.monte_carlo import monte_carlo
 
 ROOT = Path(__file__).resolve().parents[2]
 CMOUNT = ROOT / "lenses" / "cmount_4p.json"
@@ -36,7 +36,7 @@ def test_tolerance_json_equals_library_and_writes_files(tmp_path: Path) -> None:
     model = build(load_spec(CMOUNT))
     settings = ToleranceSpec.model_validate({"profile": "s6.2", "sampling": "rings:4", "trials": 12, "seed": 4,
                                              "items": [{"kind": "element_tilt_x", "limit": 1.0}]})
-    mc = monte_carlo(make_job(model, settings), 12, seed=4)
+    mc = monte_carlo(tolerance_job(model, settings), 12, seed=4)
     assert [y["value"] for y in rep["monte_carlo"]["yields"]] == [y["value"] for y in mc.yields]
     assert len(rep["tolerances"]) == 24 + 4  # S6.2 + one tilt per element
     assert {s["name"] for s in rep["sensitivity"]} == {t["name"] for t in rep["tolerances"]}

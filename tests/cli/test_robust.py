@@ -325,7 +325,7 @@ def test_help_imports_no_torch() -> None:
 
 def test_progress_is_plain_lines_when_not_a_terminal(tmp_path: Path) -> None:
     from lensopt.cli.optimize import LiveProgress
-    from lensopt.optim.run import Progress
+    from lensopt.optim.driver import Progress
 
     lines = []
 

@@ -1,4 +1,4 @@
-"""``optim.run.retain_freed_memory``: freed arrays stay in the process, so the next step's arrays of the
+"""``optim.driver.retain_freed_memory``: freed arrays stay in the process, so the next step's arrays of the
 same size do not fault their pages in again (the kernel's count of minor page faults is the oracle)."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 SCRIPT = textwrap.dedent("""
     import resource
     import torch
-    from lensopt.optim.run import retain_freed_memory
+    from lensopt.optim.driver import retain_freed_memory
 
     def faults():
         r0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt

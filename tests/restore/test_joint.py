@@ -15,10 +15,10 @@ from typer.testing import CliRunner
 from lensopt.checkpoint import load_checkpoint
 from lensopt.cli.app import app
 from lensopt.design import build_problem
+from lensopt.design.joint import RestoredObjective
 from lensopt.design.joint_run import run_joint
 from lensopt.optim import Problem
 from lensopt.optim.gtra import gtra_residual
-from lensopt.optim.joint import RestoredObjective
 from lensopt.restore import ConditionedRestorer, RestoreConfig
 from lensopt.spec import parse_spec
 

@@ -23,6 +23,7 @@ import pytest
 import scipy.optimize as scipy_opt
 import torch
 
+from lensopt.design.tolerance import tolerance_job
 from lensopt.optics.aiming import aim_chief, stop_hit
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.paraxial import field_tangents, first_order
@@ -30,7 +31,6 @@ from lensopt.optics.placement import Placement
 from lensopt.optics.sampling import launch
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
-from lensopt.spec.tolerance_build import make_job
 from lensopt.tolerance.evaluate import evaluate
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -96,7 +96,7 @@ def test_cmount_stop_decenter_in_tolerance_trials() -> None:
     values = torch.tensor([[0.0, 0.0], [0.03, 0.05]], dtype=torch.float64)
     out = {}
     for aim in ("none", "chief"):
-        job = make_job(model, ToleranceSpec.model_validate({"items": items, "aim": aim, "sampling": "rings:6"}))
+        job = tolerance_job(model, ToleranceSpec.model_validate({"items": items, "aim": aim, "sampling": "rings:6"}))
         out[aim] = evaluate(job.setup, job.params(values))
     none, chief = out["none"]["esr"] * 1e3, out["chief"]["esr"] * 1e3
     assert abs(float(none[1] - none[0])) < 1e-12  # blind to the stop decenter

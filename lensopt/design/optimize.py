@@ -1,4 +1,4 @@
-"""``lensopt optimize`` on a spec: build the problem (``design.setup``), run it (``optim.run``), bind the
+"""``lensopt optimize`` on a spec: build the problem (``design.setup``), run it (``optim.driver``), bind the
 glasses through the spec (``design.writeback``), and write the optimized lens back as a spec."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from lensopt.design.setup import build_problem
 from lensopt.design.writeback import BoundGlass, bind_glasses, to_spec
 from lensopt.devices import resolve_device
 from lensopt.errors import LensoptError
+from lensopt.optim.driver import JACOBIANS, OptimizeResult, Progress, run_problem
 from lensopt.optim.problem import Problem
-from lensopt.optim.run import JACOBIANS, OptimizeResult, Progress, run_problem
 from lensopt.spec.models import LensSpec
 
 __all__ = ["optimize"]
@@ -25,7 +25,7 @@ def optimize(spec: LensSpec, *, optimizer: str | None = None, steps: int | None 
 
     Ctrl-C (KeyboardInterrupt) ends the run early; the result then holds the best lens so far.
     ``device``: where the problem's tensors live (default CPU); ``jacobian``: ``eager`` or
-    ``compiled`` (see ``lensopt.optim.run.make_optimizer``); ``full_weight``: no weight schedules, each
+    ``compiled`` (see ``lensopt.optim.driver.make_optimizer``); ``full_weight``: no weight schedules, each
     group at the weight its schedule ends on from the first step (``OptimizeSpec.at_full_weight``), for
     continuing a written lens; the written lens keeps the spec's schedules.
 

@@ -1,4 +1,5 @@
-"""End-to-end design of a lens and its restoration network (``objective = "restored"``, S3.3).
+"""One step of the end-to-end design of a lens and its restoration network (``objective = "restored"``,
+S3.3): lens optimization (``optim``) and network training (``restore``) composed.
 
 Each iteration (S3.3.1) draws one minibatch (patches + pseudo-random sensor tiles, as the ``raw``
 objective), then
@@ -19,80 +20,32 @@ this is the single-process run on the combined batch, to rounding.
 from __future__ import annotations
 
 import hashlib
-import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import torch
 from torch import Tensor, nn
 
+from lensopt.errors import LensoptError
 from lensopt.imaging.camera import Camera
 from lensopt.imaging.convolve import overlap_add_convolve
-from lensopt.imaging.render import Spots, psfs_from_spots
+from lensopt.imaging.metrics import psnr_batch, psnr_of_mse, ssim
+from lensopt.imaging.render import Spots, psfs_from_spots, weighted_centroid
 from lensopt.imaging.scene import Region
 from lensopt.optim.gtra import GtraTarget, gtra_target, psf_window
 from lensopt.optim.image_objective import ImageObjective
-from lensopt.optim.irm import cosine_lr, network_step, psnr_db, region_grids_for
 from lensopt.optim.settings import ImageSettings
+from lensopt.parallel import Dist
+from lensopt.restore.capture import region_grids_for
 from lensopt.restore.model import mean_patch_psf
+from lensopt.restore.train import cosine_lr, network_step
 
-__all__ = ["RestoredObjective", "Dist", "JointState", "joint_step", "evaluate_pair"]
+__all__ = ["RestoredObjective", "joint_step", "evaluate_pair"]
 
 
 def _seed(*parts: object) -> int:
     return int.from_bytes(hashlib.sha256(":".join(map(str, parts)).encode()).digest()[:8], "little") >> 1
-
-
-@dataclass(frozen=True)
-class Dist:
-    """This process's place in a data-parallel run (rank 0 of 1 without torch.distributed)."""
-
-    rank: int = 0
-    world: int = 1
-    device: str = "cpu"  # where collectives run: cpu for gloo, the rank's GPU for NCCL
-
-    @property
-    def active(self) -> bool:
-        return self.world > 1
-
-    def share(self, n: int) -> slice:
-        """This rank's slice of a batch of ``n`` (equal shares; ``n`` must divide)."""
-        k = n // self.world
-        return slice(self.rank * k, (self.rank + 1) * k)
-
-    def mean(self, t: Tensor) -> Tensor:
-        """All-reduced mean over ranks (identity for one process)."""
-        if not self.active:
-            return t
-        import torch.distributed as dist
-
-        src = t.device
-        t = t.detach().clone().to(self.device)
-        dist.all_reduce(t)
-        return (t / self.world).to(src)
-
-    def any(self, flag: bool) -> bool:
-        """True on every rank if ``flag`` is true on any (a stop request must be seen by all ranks at the
-        same step boundary, or the others would wait in the next collective)."""
-        if not self.active:
-            return flag
-        import torch.distributed as dist
-
-        t = torch.tensor([int(flag)], device=self.device)
-        dist.all_reduce(t, op=dist.ReduceOp.MAX)
-        return bool(t.item())
-
-    def broadcast(self, t: Tensor) -> Tensor:
-        if not self.active:
-            return t
-        import torch.distributed as dist
-
-        src = t.device
-        t = t.detach().clone().contiguous().to(self.device)
-        dist.broadcast(t, 0)
-        return t.to(src)
 
 
 class RestoredObjective(ImageObjective):
@@ -108,8 +61,6 @@ class RestoredObjective(ImageObjective):
         self.noise_seed = 0
         super().__init__(camera, image, mode="gtra", dtype=dtype)
         if image.batch % self.dist.world:
-            from lensopt.errors import LensoptError
-
             raise LensoptError(f"must be divisible by the number of processes ({self.dist.world})",
                                path="optimize.image.batch", got=image.batch)
         self.net = net
@@ -166,8 +117,6 @@ class RestoredObjective(ImageObjective):
         def surrogate(xy: Tensor) -> Tensor:  # value L and gradient ∇L of the whole batch at ε₀, exactly
             return loss + (grad * (xy - e0)).sum()
 
-        from lensopt.imaging.render import weighted_centroid
-
         center = weighted_centroid(spots.xy, spots.valid, spots.wavelength_weights, spots.half)
         self.target = gtra_target(e0, spots.valid, surrogate,
                                   window=psf_window(center, self.settings.psf_size, self.sensor.pitch_mm))
@@ -178,19 +127,6 @@ class RestoredObjective(ImageObjective):
         with torch.no_grad():
             spots = self.spots(lens)
             return self.capture(spots.xy, spots, self._airy(spots, lens), self.images, self.regions)
-
-
-@dataclass
-class JointState:
-    """What changes during a joint run (and what a checkpoint holds besides the LM state)."""
-
-    step: int = 0
-    history: list[dict[str, float]] = field(default_factory=list)
-
-
-def _invalidate(lm: Any) -> None:
-    lm._J = None
-    lm._r = None
 
 
 def joint_step(problem: Any, lm: Any, obj: RestoredObjective, net: nn.Module, adam: torch.optim.Optimizer,
@@ -205,7 +141,7 @@ def joint_step(problem: Any, lm: Any, obj: RestoredObjective, net: nn.Module, ad
         lens, _ = problem.lens(lm.theta)
     target = obj.update(lens)
     t1 = t()
-    _invalidate(lm)
+    lm.invalidate()
     info = lm.step(problem.row_scale(step / max(total, 1)))
     if dist.active:
         lm.theta = dist.broadcast(lm.theta)
@@ -220,13 +156,9 @@ def joint_step(problem: Any, lm: Any, obj: RestoredObjective, net: nn.Module, ad
     if timings is not None:
         for k, v in (("gtra_target", t1 - t0), ("lm_step", t2 - t1), ("network_step", t3 - t2)):
             timings[k] = timings.get(k, 0.0) + v
-    return {"step": step + 1, "loss_restored_mse": float(target.loss), "psnr_batch_db": _db(float(target.loss)),
+    return {"step": step + 1, "loss_restored_mse": float(target.loss), "psnr_batch_db": psnr_of_mse(float(target.loss)),
             "merit": info.merit, "damping": info.damping, "accepted": bool(info.accepted), "mae": mae,
             "lr": lr_now, "wall_s": t3 - t0}
-
-
-def _db(mse: float) -> float:
-    return 10 * math.log10(1 / mse) if mse > 0 else math.inf
 
 
 def evaluate_pair(obj: RestoredObjective, lens: Any, net: nn.Module, count: int, *, chunk: int = 4,
@@ -246,11 +178,9 @@ def evaluate_pair(obj: RestoredObjective, lens: Any, net: nn.Module, count: int,
             out = net(cap, k.to(cap.dtype))
             if examples is not None and i == 0:
                 examples.update(scene=images[:chunk], capture=cap, restored=out, psf=k)
-            raw.append(psnr_db(images[i:i + chunk], cap))
-            rest.append(psnr_db(images[i:i + chunk], out))
+            raw.append(psnr_batch(images[i:i + chunk], cap))
+            rest.append(psnr_batch(images[i:i + chunk], out))
             if with_ssim:
-                from lensopt.imaging.metrics import ssim
-
                 for a, b, c in zip(images[i:i + chunk], cap, out, strict=True):
                     ref = a.permute(1, 2, 0).cpu().numpy()
                     s_raw.append(ssim(ref, b.clamp(0, 1).permute(1, 2, 0).cpu().numpy()))

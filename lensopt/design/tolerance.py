@@ -1,6 +1,6 @@
 """Tolerancing from a built spec: the ``Job`` of a lens spec and its ``[tolerance]`` settings, the LM
-compensators from the spec's variables, and trial lenses written back as specs (the spec layer sits
-above ``lensopt.tolerance``, which never imports it).
+compensators from the spec's variables, and trial lenses written back as specs (``lensopt.tolerance``
+never imports the spec; this layer sits above both).
 
 ``trial_spec`` writes one trial as a lens spec (radii, thicknesses, decenters/tilts, elements;
 perturbed media as tabulated glasses exact at the spec's wavelengths; the compensators applied: the
@@ -20,17 +20,18 @@ from lensopt.errors import LensoptError
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec.build import Model
 from lensopt.spec.models import LensSpec
+from lensopt.tolerance.job import Job
 from lensopt.tolerance.model import ARCMIN, Tolerance, TrialParams, elements_of
-from lensopt.tolerance.run import Job
-from lensopt.tolerance.setup import make_job as _make_job
+from lensopt.tolerance.setup import make_job
 
-__all__ = ["make_job", "lm_variables", "trial_spec"]
+__all__ = ["tolerance_job", "lm_variables", "trial_spec"]
 
 
-def make_job(model: Model, settings: Any, tols: list[Tolerance] | None = None, *, restore: Any = None) -> Job:
+def tolerance_job(model: Model, settings: Any, tols: list[Tolerance] | None = None, *,
+                  restore: Any = None) -> Job:
     """The tolerance ``Job`` of a built spec and its ``ToleranceSpec`` settings; ``restore``: the
-    restoration hook of the ``psnr`` metric (``imaging.evaluate``'s, e.g. ``optim.irm_run.restoration_hook``)."""
-    job = _make_job(model.lens, model.system, model.media, settings, lm_vars=lm_variables(model), tols=tols)
+    restoration hook of the ``psnr`` metric (``imaging.evaluate``'s, e.g. ``restore.apply.restoration_hook``)."""
+    job = make_job(model.lens, model.system, model.media, settings, lm_vars=lm_variables(model), tols=tols)
     if settings.metric != "psnr":
         if restore is not None:
             raise LensoptError("a restoration network is used by the psnr metric only", path="--irm",

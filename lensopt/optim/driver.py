@@ -14,9 +14,9 @@ from typing import Any
 import torch
 
 from lensopt.errors import LensoptError
+from lensopt.imaging.metrics import psnr_of_mse
 from lensopt.optim.adam import AdamOptimizer
 from lensopt.optim.compiled_jacobian import CompiledJacobian
-from lensopt.optim.image_objective import psnr_db
 from lensopt.optim.lm import LevenbergMarquardt, Trial
 from lensopt.optim.problem import Problem
 
@@ -220,7 +220,7 @@ def run_problem(problem: Problem, *, optimizer: str | None = None, steps: int | 
                 callback(Progress(k, total, phase, info.merit, state.damping, esr, state.accepted, state.rejected,
                                   info.accepted, {n: m / tot for n, m in merits.items()},
                                   _valid_fraction(problem, r), event or info.reason, elapsed, image_loss,
-                                  psnr_db(image_loss) if image_loss == image_loss else float("nan")))
+                                  psnr_of_mse(image_loss) if image_loss == image_loss else float("nan")))
             event = ""
             flat = problem.schedules_settled(frac)
             reason = state.stop_reason()
