@@ -17,10 +17,11 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
+from lensopt.accel import jacobian as compiled_jacobian
 from lensopt.analysis.report import trace_report
 from lensopt.design import optimize
 from lensopt.optics.sampling import PupilSampling
-from lensopt.optim import compiled_jacobian, lm, problem
+from lensopt.optim import lm, problem
 from lensopt.spec import build, load_spec
 
 SPEC = Path(__file__).resolve().parents[1] / "specs" / "cmount_4p.toml"

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import torch
 
-from lensopt.optics.backend import use_backend
+from lensopt import accel
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec import build, load_spec
@@ -32,8 +32,8 @@ def main() -> None:
     m = build(load_spec(Path(__file__).resolve().parents[1] / "specs" / "achromat_f10.toml"))
     pts = PupilSampling.parse(f"rings:{n}").points(dtype=torch.float64)
     t = time.perf_counter()
-    with torch.no_grad(), use_backend("compiled"):
-        trace_bundle(m.lens, m.system, pts, half_pupil=True)
+    with torch.no_grad():
+        trace_bundle(m.lens, m.system, pts, half_pupil=True, engine=accel.engine("compiled"))
     print(n, mode, "first call", round(time.perf_counter() - t, 1), "s")
 
 

@@ -22,8 +22,8 @@ from pathlib import Path
 
 import torch
 
+from lensopt.accel.jacobian import capture_jacobian
 from lensopt.design import build_problem
-from lensopt.optim.compiled_jacobian import capture_jacobian
 from lensopt.spec import load_spec
 
 SPECS = Path(__file__).resolve().parents[1] / "specs"

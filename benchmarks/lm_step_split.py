@@ -17,14 +17,13 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from lm_vs_adam import problem  # noqa: E402
 
-from lensopt.optics.backend import set_backend  # noqa: E402
+from lensopt.engine import retain_freed_memory  # noqa: E402
 from lensopt.optim import lm as lmmod  # noqa: E402
-from lensopt.optim.driver import make_optimizer, retain_freed_memory  # noqa: E402
+from lensopt.optim.driver import make_optimizer  # noqa: E402
 
 
 def main() -> None:
     torch.set_num_threads(1)
-    set_backend("eager")
     retain_freed_memory()
     target = float(sys.argv[1]) if len(sys.argv) > 1 else 3.2262e-3
     p = problem("cmount")

@@ -1,5 +1,5 @@
 """Each change to the compiled trace's kernel, measured (issue 14, session 21): the Cooke triplet at
-1e6 rays, float64, one thread, every variant compiled by Inductor as ``optics.compiled`` compiles it
+1e6 rays, float64, one thread, every variant compiled by Inductor as ``accel.compiled`` compiles it
 and timed interleaved with the fused sketch (``soa_sketch.py``) in the same run.
 
 Variants, cumulative (``trace.KernelOptions``):
@@ -38,7 +38,7 @@ import torch
 from soa_sketch import sketch_runner
 from trace_speed import SPEC, import_before, make_rays
 
-from lensopt.optics.compiled import _MAX_FUSION_SIZE, component_major_rays, near_only_surfaces
+from lensopt.accel.compiled import _MAX_FUSION_SIZE, component_major_rays, near_only_surfaces
 from lensopt.optics.lens import Lens
 from lensopt.optics.trace import KernelOptions, Rays, index_ratio, trace, trace_kernel
 

@@ -6,7 +6,7 @@ points, started on the plane z = −5 mm before surface 1) to the image plane, C
 - ``optiland``: optiland 0.6.3's real-ray tracer (numpy backend), ``optic.surfaces.trace`` on
   ``RealRays`` (ray generation excluded, as for lensopt), float64;
 - ``eager``: ``lensopt.optics.trace.trace``;
-- ``compiled``: ``lensopt.optics.compiled.compiled_trace`` (``torch.compile``, Inductor C++);
+- ``compiled``: ``lensopt.accel.compiled.compiled_trace`` (``torch.compile``, Inductor C++);
 - ``sketch``: ``benchmarks/soa_sketch.py``, a compiled component-wise sphere + Snell loop — not
   lensopt, the ceiling a component-wise formulation of the trace would reach (``--no-ceiling``).
 
@@ -44,7 +44,7 @@ import torch
 from procmem import vm_kb
 from soa_sketch import sketch_runner
 
-from lensopt.optics.compiled import compiled_trace, component_major_rays
+from lensopt.accel.compiled import compiled_trace, component_major_rays
 from lensopt.optics.trace import Rays, trace
 from lensopt.spec import build, load_spec
 

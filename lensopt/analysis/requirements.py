@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import torch
 
 from lensopt.analysis.field import field_summary
+from lensopt.engine import Engine
 from lensopt.materials import design_catalog
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.lens import Lens, System
@@ -95,8 +96,8 @@ def failed(checks: list[Check]) -> list[str]:
     return [c.name for c in checks if not c.ok]
 
 
-def _pupil(grid: int, rim: int) -> torch.Tensor:
-    pts = PupilSampling.parse(f"grid:{grid}").points(dtype=torch.float64)
+def _pupil(grid: int, rim: int, *, engine: Engine | None = None) -> torch.Tensor:
+    pts = PupilSampling.parse(f"grid:{grid}").points(dtype=torch.float64, engine=engine)
     phi = torch.linspace(0, 2 * math.pi, rim + 1, dtype=torch.float64)[:-1]
     return torch.cat([pts, torch.stack([phi.cos(), phi.sin()], -1)])
 
@@ -110,7 +111,7 @@ def check_requirements(
     materials: list[str | None] = (),  # type: ignore[assignment]
     fields: int = 11,
     grid: int = 41,
-    rim: int = 64,
+    rim: int = 64, engine: Engine | None = None,
 ) -> list[Check]:
     """Check ``req`` on a dense ray sample of the lens.
 
@@ -125,7 +126,7 @@ def check_requirements(
     dense = dataclasses.replace(system, rel_field=tuple(rel), field_weights=(), vignetting=())
     out: list[Check] = []
     with torch.no_grad():
-        b = trace_bundle(lens, dense, _pupil(grid, rim).to(lens.device), record=True)
+        b = trace_bundle(lens, dense, _pupil(grid, rim, engine=engine).to(lens.device), record=True, engine=engine)
         res = b.result
         valid = res.valid
         blocked = int((res.status == int(Status.BLOCKED)).sum())
@@ -184,7 +185,7 @@ def check_requirements(
             worst = math.degrees(math.acos(float(nz.min())))
             out.append(Check("surface normals", worst, f"≤ {req.max_normal_deg:g}°", worst <= req.max_normal_deg))
         if req.max_distortion_percent is not None or req.min_illumination is not None:
-            summ = field_summary(lens, system, PupilSampling.parse(f"grid:{grid}"), rel_field=rel)
+            summ = field_summary(lens, system, PupilSampling.parse(f"grid:{grid}"), rel_field=rel, engine=engine)
             if req.max_distortion_percent is not None:
                 d = 100 * float(summ.distortion.abs().max())
                 out.append(Check("|distortion|", d, f"≤ {req.max_distortion_percent:g} %",

@@ -15,7 +15,7 @@ from typing import Annotated, Any
 
 import typer
 
-from lensopt.cli.common import LensArg, console, err_console, handle_errors, load_model
+from lensopt.cli.common import LensArg, console, err_console, handle_errors, load_model, make_engine
 from lensopt.cli.signals import stop_on_signals, stopped_at_step_boundary
 from lensopt.errors import LensoptError
 
@@ -51,12 +51,14 @@ def train_irm_cmd(
     """Train the restoration network for a fixed lens (S4.3.2): Adam on MAE, cosine schedule."""
     from lensopt.devices import resolve_device
 
+    engine = make_engine()
     dev = resolve_device(device)
     model = load_model(lens)
     setup, net, cfg = _training_settings(model, patch=patch, batch=batch, lr=lr, checkpoint_every=checkpoint_every,
                                          validate_every=validate_every, val_patches=val_patches, seed=seed,
-                                         fields=fields, sampling=sampling, psf_size=psf_size, grid=grid)
-    source, val_source, data = data_sources(images, cfg.patch, seed)
+                                         fields=fields, sampling=sampling, psf_size=psf_size, grid=grid,
+                                         engine=engine)
+    source, val_source, data = data_sources(images, cfg.patch, seed, engine=engine)
     n_steps = steps or cfg.steps
     res, dist, dev = _train(model, setup, net, cfg, (source, val_source, data), steps=n_steps, output=output,
                             resume=resume, device=dev, log_dir=log_dir, show=None if as_json else _train_line(n_steps))
@@ -74,7 +76,7 @@ def train_irm_cmd(
 
 def _training_settings(model: Any, *, patch: int | None, batch: int | None, lr: float | None,
                        checkpoint_every: int | None, validate_every: int | None, val_patches: int | None, seed: int,
-                       fields: int, sampling: str, psf_size: int, grid: str) -> tuple[Any, Any, Any]:
+                       fields: int, sampling: str, psf_size: int, grid: str, engine: Any) -> tuple[Any, Any, Any]:
     """(imaging set-up, network config, training config) of ``train-irm``: the spec's ``[restore]`` with the
     options given on the command line."""
     import dataclasses
@@ -88,7 +90,8 @@ def _training_settings(model: Any, *, patch: int | None, batch: int | None, lr: 
             if v is not None}
     cfg = dataclasses.replace(cfg, seed=seed, **over)
     setup = imaging_setup(model.camera(), patch=cfg.patch, fields=fields, sampling=sampling, psf_size=psf_size,
-                          grid=parse_grid_text(grid, "--grid"), noise_sigma=cfg.noise_sigma, device=None)
+                          grid=parse_grid_text(grid, "--grid"), noise_sigma=cfg.noise_sigma, device=None,
+                          engine=engine)
     return setup, dataclasses.replace(net, channels=setup.channels), cfg
 
 
@@ -142,10 +145,11 @@ def restore_cmd(
     from lensopt.imaging.scene import parse_region
     from lensopt.restore.apply import load_restorer, restore_image
 
+    engine = make_engine()
     dev = resolve_device(device)
     model = load_model(lens)
-    net, setup, tile = load_restorer(checkpoint, model, device=dev, option="CHECKPOINT")
-    arr, info = read_image(image)
+    net, setup, tile = load_restorer(checkpoint, model, device=dev, option="CHECKPOINT", engine=engine)
+    arr, info = read_image(image, engine=engine)
     if arr.shape[-1] != net.config.channels:
         raise LensoptError(f"the network restores {net.config.channels}-channel images", path="IMAGE",
                            got=f"{arr.shape[-1]} channels")
@@ -166,19 +170,21 @@ def parse_grid_text(text: str, option: str) -> tuple[int, int]:
     return a, b
 
 
-def data_sources(images: str, patch: int, seed: int) -> tuple[Any, Any, str]:
-    """(training source, held-out source, description) for ``--images DIR|procedural``."""
+def data_sources(images: str, patch: int, seed: int, *, engine: Any = None) -> tuple[Any, Any, str]:
+    """(training source, held-out source, description) for ``--images DIR|procedural``; ``engine``: the
+    memory budget of every image read."""
     from lensopt.imaging.datasets import DeadLeaves, ImageFolder
 
     if images == "procedural":
         return DeadLeaves(seed=seed), DeadLeaves(seed=seed + 1_000_003), "procedural"
-    train = ImageFolder(images, split="train", patch=patch, option="--images")
-    val = ImageFolder(images, split="val", patch=patch, option="--images")
+    train = ImageFolder(images, split="train", patch=patch, option="--images", engine=engine)
+    val = ImageFolder(images, split="val", patch=patch, option="--images", engine=engine)
     return train, val, str(Path(images).resolve())
 
 
 def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed: int, checkpoint: Path | None,
-                      resume: bool, device: str, log_dir: Path | None, quiet: bool, as_json: bool) -> None:
+                      resume: bool, device: str, log_dir: Path | None, quiet: bool, as_json: bool,
+                      engine: Any = None) -> None:
     """``lensopt optimize`` with ``objective = "restored"``: the joint run, then the lens (and, with
     --checkpoint, the network) written; rank 0 only writes and prints under torchrun."""
     from lensopt.design.joint_run import run_joint
@@ -195,7 +201,7 @@ def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed:
         with stop_on_signals() as flag:
             res = run_joint(start_spec, steps=steps, seed=seed, checkpoint=checkpoint, resume=resume, device=dev,
                             log_dir=log_dir, dist=dist, stop=lambda: dist.any(flag[0]),
-                            on_progress=_joint_line if loud else None)
+                            on_progress=_joint_line if loud else None, engine=engine)
         if dist.rank == 0:
             save_json(res.spec, output)
             summary = {"output": str(output), "checkpoint": str(checkpoint) if checkpoint else None,

@@ -14,7 +14,7 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from lensopt.cli.common import JsonOpt, SeedOpt, console, err_console, handle_errors, print_json
+from lensopt.cli.common import JsonOpt, SeedOpt, console, err_console, handle_errors, make_engine, print_json
 from lensopt.cli.signals import report_signal, signal_word, state
 from lensopt.errors import LensoptError
 
@@ -182,6 +182,7 @@ def sweep(
     from lensopt.study.sweep import Settings, expand_grid, run_sweep
 
     sched = _check_scheduler(scheduler)
+    engine = make_engine(retain_freed_memory=True)
     base = load_spec(spec)
     try:
         text = spec.read_text(encoding="utf-8")
@@ -193,7 +194,8 @@ def sweep(
     settings = Settings(starts=starts, sigma=perturb, steps=steps, seed=seed, esr_sampling=esr_sampling)
     with SweepProgress(err_console, points, starts, enabled=not quiet) as progress:
         result = run_sweep(base, text, varies, settings, output, scheduler=sched, workers=workers,
-                           restart=restart, spec_name=base.name or spec.name, callback=progress, points=points)
+                           restart=restart, spec_name=base.name or spec.name, callback=progress, points=points,
+                           engine=engine)
     if as_json:
         print_json({"output": str(output), "complete": result.complete, "interrupted": result.interrupted,
                     "computed": result.computed, "skipped": result.skipped, "elapsed_s": result.elapsed_s,

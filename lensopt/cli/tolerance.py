@@ -10,7 +10,16 @@ from typing import Annotated, Any
 import typer
 from rich.table import Table
 
-from lensopt.cli.common import JsonOpt, LensArg, check_seed, console, handle_errors, load_model, print_json
+from lensopt.cli.common import (
+    JsonOpt,
+    LensArg,
+    check_seed,
+    console,
+    handle_errors,
+    load_model,
+    make_engine,
+    print_json,
+)
 from lensopt.errors import LensoptError
 
 __all__ = ["commands", "parse_fields"]
@@ -59,6 +68,7 @@ def tolerance_cmd(
     from lensopt.spec.io import load_tolerances
     from lensopt.spec.tolerance import ToleranceSpec
 
+    engine = make_engine()
     model = load_model(lens)
     base = load_tolerances(tolerances) if tolerances is not None else model.spec.tolerance
     if base is None:
@@ -87,12 +97,12 @@ def tolerance_cmd(
                                got=settings.metric)
         from lensopt.restore.apply import restoration_hook
 
-        hook = restoration_hook(model, irm)
+        hook = restoration_hook(model, irm, engine=engine)
     from lensopt.design.tolerance_study import tolerance_report
 
     report = tolerance_report(model, settings, scheduler=sched, workers=workers, out_dir=output_dir,
                               worst=worst, inverse_delta=inverse_delta, sensitivity=not no_sensitivity,
-                              compiled=compile_, restore=hook)
+                              compiled=compile_, restore=hook, engine=engine)
     if as_json:
         print_json(report)
     else:

@@ -21,10 +21,10 @@ from lensopt.cli.common import (
     console,
     handle_errors,
     load_model,
+    make_engine,
     parse_frequencies,
     parse_sampling,
     print_json,
-    with_backend,
 )
 from lensopt.errors import LensoptError
 
@@ -35,7 +35,6 @@ commands = typer.Typer()  # its commands, put in order by lensopt.cli.app
 
 @commands.command("trace", short_help="First-order data, spot sizes, failures, distortion, illumination.")
 @handle_errors
-@with_backend
 def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None, seed: SeedOpt = 0,
           as_json: JsonOpt = False, aim_steps: AimStepsOpt = None,
           mtf: Annotated[str | None, typer.Option("--mtf", help="Also MTF at these cycles/mm (comma-separated; "
@@ -45,11 +44,12 @@ def trace(lens: LensArg, sampling: SamplingOpt = "rings:24", aim: AimOpt = None,
     relative illumination per field."""
     from lensopt.analysis.report import mtf_report, trace_report
 
+    engine = make_engine(backend)
     model = load_model(lens)
     report = trace_report(model, parse_sampling(sampling, seed),
-                          aim=check_aim(aim), aim_steps=check_aim_steps(aim_steps))
+                          aim=check_aim(aim), aim_steps=check_aim_steps(aim_steps), engine=engine)
     if mtf is not None:
-        report["mtf"] = mtf_report(model, parse_frequencies(mtf, "--mtf"))
+        report["mtf"] = mtf_report(model, parse_frequencies(mtf, "--mtf"), engine=engine)
     if as_json:
         print_json(report)
         return

@@ -27,6 +27,7 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.imaging.camera import Camera
 from lensopt.imaging.convolve import overlap_add_convolve
@@ -54,12 +55,13 @@ class RestoredObjective(ImageObjective):
     the capture and the network's conditioning PSF (mean of the sub-tile PSFs)."""
 
     def __init__(self, camera: Camera, image: ImageSettings, net: nn.Module, *, dist: Dist | None = None,
-                 device: torch.device | str = "cpu", dtype: torch.dtype = torch.float32) -> None:
+                 device: torch.device | str = "cpu", dtype: torch.dtype = torch.float32,
+                 engine: Engine | None = None) -> None:
         self.step_index = 0
         self.dist = dist or Dist()
         self.device = torch.device(device)
         self.noise_seed = 0
-        super().__init__(camera, image, mode="gtra", dtype=dtype)
+        super().__init__(camera, image, mode="gtra", dtype=dtype, engine=engine)
         if image.batch % self.dist.world:
             raise LensoptError(f"must be divisible by the number of processes ({self.dist.world})",
                                path="optimize.image.batch", got=image.batch)

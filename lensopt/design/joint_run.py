@@ -29,6 +29,7 @@ from lensopt.design.joint import RestoredObjective, evaluate_pair, joint_step
 from lensopt.design.restore import configs_from_spec
 from lensopt.design.setup import SpecProblem, build_problem
 from lensopt.design.writeback import to_spec
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.optim.lm import LevenbergMarquardt, Trial
 from lensopt.optim.settings import ImageSettings
@@ -101,14 +102,14 @@ class JointParts:
 
 
 def joint_parts(start_spec: Any, *, seed: int = 0, device: torch.device | str = "cpu",
-                dist: Dist | None = None) -> tuple[JointParts, list[str]]:
+                dist: Dist | None = None, engine: Engine | None = None) -> tuple[JointParts, list[str]]:
     """The problem, network, objective and LM state of a joint run of ``start_spec`` (and the notes of
     ``joint_spec``)."""
     dist = dist or Dist()
     spec, notes = joint_spec(start_spec)
     net_cfg, cfg = configs_from_spec(spec.restore)
     net_cfg = RestoreConfig(**{**net_cfg.to_dict(), "channels": 3})
-    problem = build_problem(spec, seed=seed, method="lm")
+    problem = build_problem(spec, seed=seed, method="lm", engine=engine)
     if problem.num_variables == 0:
         raise LensoptError("nothing to optimize: no surface has a vary list", path="surfaces")
     torch.manual_seed(seed)
@@ -120,7 +121,7 @@ def joint_parts(start_spec: Any, *, seed: int = 0, device: torch.device | str = 
 
         model = DistributedDataParallel(net)
     obj = RestoredObjective(problem.setup.camera, problem.opt.image or ImageSettings(), model, dist=dist,
-                            device=device)
+                            device=device, engine=engine)
     problem.use_image(obj)
 
     def evaluate_fn(t: torch.Tensor) -> Trial:
@@ -193,11 +194,12 @@ def run_joint(
     checkpoint_every: int | None = None,
     validate_every: int | None = None,
     evaluate: bool = True,
+    engine: Engine | None = None,
 ) -> JointResult:
     """Optimize the lens of ``start_spec`` jointly with a restoration network (S3.3.1)."""
     t_start = time.perf_counter()
     dist = dist or Dist()
-    parts, notes = joint_parts(start_spec, seed=seed, device=device, dist=dist)
+    parts, notes = joint_parts(start_spec, seed=seed, device=device, dist=dist, engine=engine)
     spec, problem, lm, cfg = parts.spec, parts.problem, parts.lm, parts.cfg
     total = steps if steps is not None else spec.optimize.steps
     ck_every = cfg.checkpoint_every if checkpoint_every is None else checkpoint_every

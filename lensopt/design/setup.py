@@ -10,6 +10,7 @@ from typing import Any
 
 import torch
 
+from lensopt.engine import Engine
 from lensopt.errors import SpecError
 from lensopt.optim import settings as st
 from lensopt.optim.problem import Problem, ProblemSetup, SurfaceInfo
@@ -172,8 +173,8 @@ class SpecProblem(Problem):
 
 
 def build_problem(spec: LensSpec, *, seed: int = 0, dtype: torch.dtype = torch.float64, method: str | None = None,
-                  image_dtype: torch.dtype = torch.float32,
-                  device: torch.device | str | None = None) -> SpecProblem:
+                  image_dtype: torch.dtype = torch.float32, device: torch.device | str | None = None,
+                  engine: Engine | None = None) -> SpecProblem:
     """The optimization problem of ``spec`` (variables, solves, residual groups of its ``[optimize]``).
 
     Args:
@@ -182,7 +183,8 @@ def build_problem(spec: LensSpec, *, seed: int = 0, dtype: torch.dtype = torch.f
         method: ``lm`` or ``adam`` (default: the spec's optimizer).
         image_dtype: dtype of rendered image patches (image objectives).
         device: where every tensor of the problem lives (θ, the lens, the rays, the Jacobian).
+        engine: trace backend and memory budget of the problem's traces (default ``Engine()``).
     """
     setup, prepared = problem_setup(spec, dtype=dtype, device=torch.device(device or "cpu"))
-    return SpecProblem(setup, prepared, seed=seed, method=method, image_dtype=image_dtype)
+    return SpecProblem(setup, prepared, seed=seed, method=method, image_dtype=image_dtype, engine=engine)
 

@@ -16,6 +16,7 @@ from typing import Any
 
 import torch
 
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec.build import Model
@@ -28,10 +29,11 @@ __all__ = ["tolerance_job", "lm_variables", "trial_spec"]
 
 
 def tolerance_job(model: Model, settings: Any, tols: list[Tolerance] | None = None, *,
-                  restore: Any = None) -> Job:
+                  restore: Any = None, engine: Engine | None = None) -> Job:
     """The tolerance ``Job`` of a built spec and its ``ToleranceSpec`` settings; ``restore``: the
     restoration hook of the ``psnr`` metric (``imaging.evaluate``'s, e.g. ``restore.apply.restoration_hook``)."""
-    job = make_job(model.lens, model.system, model.media, settings, lm_vars=lm_variables(model), tols=tols)
+    job = make_job(model.lens, model.system, model.media, settings, lm_vars=lm_variables(model), tols=tols,
+                   engine=engine)
     if settings.metric != "psnr":
         if restore is not None:
             raise LensoptError("a restoration network is used by the psnr metric only", path="--irm",
@@ -58,7 +60,7 @@ def tolerance_job(model: Model, settings: Any, tols: list[Tolerance] | None = No
     psnr = PsnrSetup(camera, count=settings.psnr_count, patch=settings.psnr_patch, seed=settings.seed,
                      sampling=settings.psnr_sampling, noise_sigma=settings.psnr_noise, restore=restore,
                      focus_reference=float(nominal["focus_shift"][0]), lm_reference=lm_ref,
-                     lm_vars=job.setup.lm_vars)
+                     lm_vars=job.setup.lm_vars, engine=engine)
     return dataclasses.replace(job, psnr=psnr)
 
 

@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from lensopt.design.tolerance import tolerance_job, trial_spec
+from lensopt.engine import Engine
 from lensopt.spec.build import Model
 from lensopt.spec.io import save_json
 from lensopt.tolerance.job import HIGHER_IS_BETTER, Job, nominal_metrics, scalar_metric
@@ -26,10 +27,10 @@ METRIC_UNITS = {"esr": "µm", "rms": "µm", "mtf": "", "distortion": "%", "psnr"
 
 def tolerance_report(model: Model, settings: Any, *, scheduler: str | None, workers: int, out_dir: Path | None,
                      worst: int, inverse_delta: float | None, sensitivity: bool = True,
-                     compiled: bool = False, restore: Any = None) -> dict[str, Any]:
+                     compiled: bool = False, restore: Any = None, engine: Engine | None = None) -> dict[str, Any]:
     """Run sensitivity and Monte Carlo; write plots and worst trials under ``out_dir``; plain data.
     ``restore``: the restoration hook of the psnr metric (``--irm``)."""
-    job = tolerance_job(model, settings, restore=restore)
+    job = tolerance_job(model, settings, restore=restore, engine=engine)
     if compiled:
         import dataclasses
 

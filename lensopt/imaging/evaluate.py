@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.imaging.camera import Camera
 from lensopt.imaging.datasets import DeadLeaves, ImageFolder, center_crop, is_div2k
@@ -79,7 +80,7 @@ SceneFn = Callable[[int], torch.Tensor]
 
 
 def scene_source(images: str | Path | None, *, count: int, patch: int, seed: int,
-                 option: str = "--images") -> tuple[SceneFn, list[str], str]:
+                 option: str = "--images", engine: Engine | None = None) -> tuple[SceneFn, list[str], str]:
     """The scenes to evaluate: ``(scene(k) -> [3, patch, patch] linear float32, names, description)``.
 
     ``images``: a folder (all its images, or ``valid_HR/`` of a DIV2K layout; the first ``count`` in name
@@ -92,7 +93,7 @@ def scene_source(images: str | Path | None, *, count: int, patch: int, seed: int
         names = [f"dead-leaves:{seed}:{k}" for k in range(count)]
         return (lambda k: src.scene(k, patch, patch)), names, f"{count} dead-leaves scenes (seed {seed})"
     folder = ImageFolder(images, split="val" if is_div2k(images) else "all", patch=patch, option=option,
-                         cache=0)
+                         cache=0, engine=engine)
     n = min(count, len(folder))
     names = [str(p.relative_to(folder.root)) for p in folder.files[:n]]
     return (lambda k: center_crop(folder.load(k), patch)), names, f"{n} images from {folder.root} ({folder.layout})"
@@ -112,6 +113,7 @@ def evaluate(
     images: str = "",
     progress: Callable[[int, int], None] | None = None,
     reuse_psfs: bool = True,
+    engine: Engine | None = None,
 ) -> Evaluation:
     """Score ``len(names)`` scenes (``scenes(k)``: ``[C, patch, patch]``) simulated through ``camera``.
 
@@ -151,11 +153,11 @@ def evaluate(
         region = grid.region(tile)
         info = {"width": patch, "height": patch, "channels": img.shape[-1]}
         plan, pilot, reg, sens = plan_scene(camera, info, region=region, effects=Effects(), options=options,
-                                            pilot=pilot)
+                                            pilot=pilot, engine=engine)
         if k == 0:
             notes += [n for n in plan.notes if n.startswith("channel weights")]
         with torch.inference_mode():
-            sim = run_plan(camera, plan, pilot, reg, sens, img, options, cache=cache)
+            sim = run_plan(camera, plan, pilot, reg, sens, img, options, cache=cache, engine=engine)
             out = torch.from_numpy(np.ascontiguousarray(sim.image))
             out = out.permute(2, 0, 1)
             if noise_sigma > 0:

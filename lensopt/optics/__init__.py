@@ -11,8 +11,9 @@
     aiming.py      ray aiming (chief, full)
     vignetting.py  vignetting factors: the pupil per field and wavelength
     trace.py       the eager sequential trace, RayTrace, failure reasons
-    bundle.py      trace a system: aiming + vignetting + trace
-    backend.py     which trace runs (eager | torch.compile | AOT package)
-    compiled.py    the torch.compile kernel
-    aot.py         AOT-compiled trace packages on disk
+    bundle.py      trace a system: aiming + vignetting + trace (on the ``Engine``'s backend)
+    transforms.py  what the core may do under torch transforms (early exits, forward mode)
+    differential.py  forward-mode derivatives of a trace, surface by surface (the staged LM Jacobian)
+
+The compiled traces (torch.compile, AOT packages) and the choice between them are ``lensopt.accel``.
 """

@@ -14,10 +14,10 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from lensopt.engine import Engine
 from lensopt.errors import SpecError
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.trace import Rays
-from lensopt.resources import require
 
 __all__ = ["PupilSampling", "pupil_rings", "pupil_grid", "fan", "launch"]
 
@@ -44,9 +44,10 @@ class PupilSampling:
         """Whether only the half pupil x ≥ 0 is sampled (x̄ = 0 by symmetry)."""
         return self.kind == "rings"
 
-    def points(self, *, dtype: torch.dtype, device: torch.device | None = None) -> Tensor:
-        """(P, 2) relative pupil coordinates."""
-        require(64 * self.n**2, f"{self} pupil sampling ({self.n**2:,} points)", lower="N of rings:N / grid:N")
+    def points(self, *, dtype: torch.dtype, device: torch.device | None = None, engine: Engine | None = None) -> Tensor:
+        """(P, 2) relative pupil coordinates; refused (``LensoptError``) beyond the engine's memory budget."""
+        (engine or Engine()).require(64 * self.n**2, f"{self} pupil sampling ({self.n**2:,} points)",
+                                     lower="N of rings:N / grid:N")
         if self.kind == "rings":
             return pupil_rings(self.n, jitter=self.jitter, seed=self.seed, dtype=dtype, device=device)
         return pupil_grid(self.n, dtype=dtype, device=device)

@@ -13,7 +13,6 @@ problem in ``lensopt.design``; the restoration network is trained in ``lensopt.r
     schedule.py           weight schedules
     lm.py                 Levenberg–Marquardt (S2.3.2)
     adam.py               Adam (S2.3.1)
-    compiled_jacobian.py  the LM Jacobian compiled (AOT/Inductor)
     driver.py             the driver: phases, glass binding, progress, Ctrl-C
     report.py             constraint margins of a lens
     gtra.py               generalized transverse ray aberrations (S66–S68)

@@ -13,10 +13,11 @@ from typing import Any
 
 import torch
 
+from lensopt.accel.jacobian import CompiledJacobian
+from lensopt.engine import retain_freed_memory
 from lensopt.errors import LensoptError
 from lensopt.imaging.metrics import psnr_of_mse
 from lensopt.optim.adam import AdamOptimizer
-from lensopt.optim.compiled_jacobian import CompiledJacobian
 from lensopt.optim.lm import LevenbergMarquardt, Trial
 from lensopt.optim.problem import Problem
 
@@ -119,38 +120,6 @@ def make_optimizer(problem: Problem, theta: torch.Tensor, method: str,
     raise LensoptError("must be lm or adam", path="--optimizer", got=method)
 
 
-_MALLOC_TUNED: list[bool] = []
-
-
-def retain_freed_memory() -> bool:
-    """Keep freed memory in the process (glibc ``mallopt``) instead of returning it to the OS at once.
-
-    Every step of the optimizer allocates and frees the same few hundred arrays of 0.1–15 MB (the
-    Jacobian's tangents, ray bundles). With glibc's defaults, arrays above the mmap threshold are mapped
-    and unmapped on every call and the top of the heap is trimmed after each free, so each step
-    touches fresh pages: the C-mount design spent 18 % of its CPU time in the kernel (8.7 M page
-    faults). Raising the mmap and trim thresholds keeps those pages for the next step (peak memory is
-    unchanged: the same arrays are live at once). Once per process; a no-op where glibc is absent.
-    Returns whether the thresholds were set.
-    """
-    if _MALLOC_TUNED:
-        return _MALLOC_TUNED[0]
-    ok = False
-    try:
-        import ctypes
-        import ctypes.util
-
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        m_trim_threshold, m_top_pad, m_mmap_threshold = -1, -2, -3
-        # Older glibc refuses an mmap threshold above 32 MB (HEAP_MAX_SIZE / 2): then 32 MB.
-        mapped = bool(libc.mallopt(m_mmap_threshold, 256 << 20)) or bool(libc.mallopt(m_mmap_threshold, 32 << 20))
-        ok = mapped and bool(libc.mallopt(m_trim_threshold, 1 << 30)) and bool(libc.mallopt(m_top_pad, 16 << 20))
-    except (OSError, AttributeError):  # not glibc (macOS, Windows, musl without mallopt)
-        ok = False
-    _MALLOC_TUNED.append(ok)
-    return ok
-
-
 Rebind = Callable[[Problem, torch.Tensor], tuple[Problem, list[Any]]]
 """Bind the glass variables of θ to the catalog: the problem of the next phase (glasses fixed) and what
 was bound."""
@@ -170,7 +139,8 @@ def run_problem(problem: Problem, *, optimizer: str | None = None, steps: int | 
         OptimizeError: nothing varies, or the start lens is not usable (the message says why).
     """
     t0 = time.perf_counter()
-    retain_freed_memory()
+    if problem.engine.retain_freed_memory:
+        retain_freed_memory()  # a process setting, made once (lensopt.engine)
     if jacobian not in JACOBIANS:
         raise LensoptError(f"must be one of {', '.join(JACOBIANS)}", path="--jacobian", got=jacobian)
     opt = problem.opt

@@ -23,6 +23,7 @@ import torch
 from torch import Tensor
 
 from lensopt.analysis.psf_stack import select_wavelengths
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.imaging.camera import Camera
 from lensopt.imaging.datasets import DeadLeaves, ImageFolder, sample_batch
@@ -61,18 +62,20 @@ class ImageObjective:
         image: the rendering settings (``[optimize.image]``).
         mode: ``gtra`` (LM) or ``scalar`` (Adam).
         dtype: dtype of the image patches (float32 rendering; float64 for identity tests).
+        engine: trace backend and memory budget of the rendering rays (default ``Engine()``).
 
     Raises:
         LensoptError: no ``[sensor]`` (or no resolution), an unusable image folder, no RGB weights.
     """
 
     def __init__(self, camera: Camera, image: ImageSettings, *, mode: str = "gtra",
-                 dtype: torch.dtype = torch.float32) -> None:
+                 dtype: torch.dtype = torch.float32, engine: Engine | None = None) -> None:
         if camera.pixel_pitch_um is None:
             raise LensoptError('objective = "raw" needs a [sensor] (pixel_pitch_um and resolution)', path="sensor")
         if camera.resolution is None:
             raise LensoptError('objective = "raw" needs the sensor resolution', path="sensor.resolution")
         self.spec = image
+        self.engine = engine or Engine()
         self.mode = mode
         self.dtype = dtype
         self.system = camera.system
@@ -83,7 +86,7 @@ class ImageObjective:
                                        seed=image.seed)
         self.rel_field = torch.linspace(0.0, 1.0, image.fields, dtype=torch.float64)
         sampling = PupilSampling.parse(image.sampling, seed=image.seed, path="optimize.image.sampling")
-        self.pupil, self.half = sampling.points(dtype=torch.float64), sampling.half
+        self.pupil, self.half = sampling.points(dtype=torch.float64, engine=self.engine), sampling.half
         wl = list(camera.spectrum.wavelengths_nm)
         cw, _, self.rgb_note = channel_weights(camera.spectrum, 3, wl)
         cw = torch.as_tensor(np.asarray(cw), dtype=torch.float64)
@@ -130,7 +133,8 @@ class ImageObjective:
         sub, system = lens, self.system
         if len(self.keep) < lens.wavelength_um.shape[0]:
             sub, system = select_wavelengths(lens, self.system, self.keep)
-        return trace_spots(sub, system, self.rel_field.to(lens.dtype), self.pupil, half=self.half, fo=fo)
+        return trace_spots(sub, system, self.rel_field.to(lens.dtype), self.pupil, half=self.half, fo=fo,
+                           engine=self.engine)
 
     def _airy(self, spots: Spots, lens: Lens) -> Tensor | None:
         if not self.settings.diffraction:

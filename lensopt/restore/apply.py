@@ -11,6 +11,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.imaging.scene import Region
 from lensopt.restore.capture import ImagingSetup, imaging_setup, lens_psfs, region_grids
@@ -21,22 +22,23 @@ __all__ = ["load_restorer", "restoration_hook", "restore_image"]
 
 
 def load_restorer(path: Path, model: Any, *, device: torch.device | str = "cpu",
-                  option: str = "CKPT") -> tuple[ConditionedRestorer, ImagingSetup, int]:
+                  option: str = "CKPT", engine: Engine | None = None) -> tuple[ConditionedRestorer, ImagingSetup, int]:
     """The network of a checkpoint for ``model`` (a built lens spec: ``lensopt.spec.Model``), on ``device``,
     with the imaging set-up it was trained with and its tile size (``restore_image``'s ``tile``)."""
     net, ck = load_network(path, model.spec, device=device, option=option)
     im = ck.meta.get("settings", {}).get("imaging", {})
     setup = imaging_setup(model.camera(), patch=16, fields=int(im.get("fields", 9)),
                           sampling=im.get("sampling", "rings:8"), psf_size=int(im.get("psf_size", 31)),
-                          grid=tuple(im.get("grid", (3, 3))))
+                          grid=tuple(im.get("grid", (3, 3))), engine=engine)
     return net, setup, int(im.get("patch", 256))
 
 
-def restoration_hook(model: Any, path: Path, *, option: str = "--irm") -> Callable[[Tensor, dict[str, Any]], Tensor]:
+def restoration_hook(model: Any, path: Path, *, option: str = "--irm",
+                     engine: Engine | None = None) -> Callable[[Tensor, dict[str, Any]], Tensor]:
     """The ``restore`` hook of ``imaging.evaluate`` (and of the tolerance ``psnr`` metric): the checkpoint's
     network restores each capture (1, C, H, W) at its sensor region ``info["region"]`` (``--irm``)."""
     device = model.lens.device
-    net, setup, tile = load_restorer(path, model, device=device, option=option)
+    net, setup, tile = load_restorer(path, model, device=device, option=option, engine=engine)
 
     def hook(capture: Tensor, info: dict[str, Any]) -> Tensor:
         if capture.shape[1] != net.config.channels:

@@ -11,6 +11,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.imaging.camera import Camera
 from lensopt.imaging.convolve import overlap_add_convolve
@@ -40,6 +41,8 @@ class ImagingSetup:
         channel_weights: (W, C) wavelength → channel weights.
         settings: PSF size, sub-tile grid, overlap, kernel, noise σ.
         channels: image channels C (3: RGB; 1: the spectrum summed into one channel).
+        sampling_text: ``sampling`` as given (``rings:8``).
+        engine: trace backend and memory budget of the PSF rays (default ``Engine()``).
     """
 
     sensor: Sensor
@@ -50,6 +53,7 @@ class ImagingSetup:
     settings: RenderSettings
     channels: int
     sampling_text: str = "rings:8"
+    engine: Engine | None = None
 
     @property
     def patch(self) -> int:
@@ -65,7 +69,8 @@ class ImagingSetup:
 
 def imaging_setup(camera: Camera, *, patch: int, fields: int = 9, sampling: str = "rings:8", psf_size: int = 31,
                   grid: tuple[int, int] = (3, 3), noise_sigma: float = 0.005, diffraction: bool = False,
-                  dtype: torch.dtype = torch.float64, device: torch.device | str | None = None) -> ImagingSetup:
+                  dtype: torch.dtype = torch.float64, device: torch.device | str | None = None,
+                  engine: Engine | None = None) -> ImagingSetup:
     """The setup for a lens on its sensor (``lensopt.spec.camera_of(model)`` / ``model.camera()``): the
     sensor's pitch and resolution are required; RGB if the spectrum gives ``rgb_weights`` or has 3
     wavelengths, else one channel."""
@@ -82,14 +87,15 @@ def imaging_setup(camera: Camera, *, patch: int, fields: int = 9, sampling: str 
     return ImagingSetup(sensor=sensor, tiles=tile_grid(sensor, patch, option="--patch"), rel_field=rel,
                         sampling=PupilSampling.parse(sampling, seed=0, path="--sampling"),
                         channel_weights=torch.as_tensor(cw, dtype=dtype, device=device), settings=settings,
-                        channels=channels, sampling_text=sampling)
+                        channels=channels, sampling_text=sampling, engine=engine)
 
 
 def lens_psfs(lens: Lens, system: System, setup: ImagingSetup) -> tuple[Tensor, Tensor]:
     """Field PSFs (F, W, S, S) at the sensor pitch and their centres (F, 2), differentiable in the lens."""
     sp = setup.sampling
-    spots = trace_spots(lens, system, setup.rel_field.to(lens.dtype), sp.points(dtype=lens.dtype, device=lens.device),
-                        half=sp.half)
+    spots = trace_spots(lens, system, setup.rel_field.to(lens.dtype),
+                        sp.points(dtype=lens.dtype, device=lens.device, engine=setup.engine), half=sp.half,
+                        engine=setup.engine)
     return psfs_from_spots(spots.xy, spots.valid, spots.wavelength_weights, half=spots.half,
                            pitch_mm=setup.sensor.pitch_mm, settings=setup.settings)
 

@@ -183,15 +183,15 @@ def test_image_and_grid_budget(tmp_path: Path) -> None:
 
 
 def test_budget_default_is_half_the_machine(monkeypatch: pytest.MonkeyPatch) -> None:
-    from lensopt import resources
+    from lensopt.cli.common import make_engine
+    from lensopt.engine import Engine, parse_size
 
     monkeypatch.delenv("LENSOPT_MAX_MEMORY", raising=False)
-    resources.set_budget(None)
     pages = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    assert resources.budget() <= 0.5 * pages + 1
-    assert resources.parse_size("1.5G") == int(1.5 * 2**30) and resources.parse_size("512M") == 512 * 2**20
-    monkeypatch.setenv("LENSOPT_MAX_MEMORY", "2K")
-    assert resources.budget() == 2048
+    assert Engine().budget <= 0.5 * pages + 1 and make_engine().budget == Engine().budget
+    assert parse_size("1.5G") == int(1.5 * 2**30) and parse_size("512M") == 512 * 2**20
+    monkeypatch.setenv("LENSOPT_MAX_MEMORY", "2K")  # read by the CLI when it makes a command's engine
+    assert make_engine().budget == 2048 and Engine().budget != 2048
 
 
 # ------------------------------------------------------------------------------------------ numbers

@@ -98,7 +98,7 @@ def compiled_trace(
         # torch.compile drops forward-mode tangents of a graph called from outside it (measured:
         # a ``forward_ad`` dual comes back with tangent None; ``torch.func.jvp`` raises), so forward
         # mode runs the eager trace, without marking the structure as failed. The optimizer's
-        # compiled Jacobian (``optim.compiled_jacobian``) compiles the jvp itself instead.
+        # compiled Jacobian (``accel.jacobian``) compiles the jvp itself instead.
         return trace(lens, rays, upto=upto, record=record, newton_iterations=newton_iterations)
     # Component-major copies (x of every ray, then y, then z): the fused kernel then loads each
     # component contiguously and vectorizes over rays; from the interleaved (*B, 3) layout Inductor

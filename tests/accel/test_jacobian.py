@@ -1,4 +1,4 @@
-"""The compiled LM Jacobian (optim/compiled_jacobian.py) equals the eager forward-mode Jacobian.
+"""The compiled LM Jacobian (accel/jacobian.py) equals the eager forward-mode Jacobian.
 
 Oracle: ``Problem.jacobian`` (eager ``torch.func.jacfwd``, itself checked against reverse mode and
 central differences in test_jacobian.py). The default tests check the captured graph run as Python
@@ -14,27 +14,19 @@ from pathlib import Path
 import pytest
 import torch
 
+from lensopt.accel.jacobian import CompiledJacobian, capture_jacobian
 from lensopt.design import build_problem
 from lensopt.optim import Problem
-from lensopt.optim.compiled_jacobian import CompiledJacobian, capture_jacobian
 from lensopt.spec import load_spec, parse_spec
-
-SPECS = Path(__file__).resolve().parents[2] / "specs"
-
-
-def _small_data(make_cooke) -> dict:  # noqa: ANN001
-    # relative illumination held above 0.99: its rows are active, and it picks its reference field by
-    # index (once a Python int, which the capture cannot read out of a traced tensor)
-    data = make_cooke(constraints={"ray_failure": {"penalty_mm": 2.0}, "distortion": {"max_percent": 0.01},
-                                   "relative_illumination": {"min": 0.99}})
-    for s in (0, 2, 4):
-        data["surfaces"][s]["vary"] = ["radius", "thickness"]
-    data["system"]["field"]["relative"] = [0.0, 1.0]
-    return data
+from tests.helpers import ROOT, SPECS, small_problem_data
 
 
-def _small_problem(make_cooke) -> Problem:  # noqa: ANN001
-    return build_problem(parse_spec(_small_data(make_cooke)))
+def _small_data(make_cooke=None) -> dict:  # noqa: ANN001 - the fixture's argument, unused
+    return small_problem_data()
+
+
+def _small_problem(make_cooke=None) -> Problem:  # noqa: ANN001 - the fixture's argument, unused
+    return build_problem(parse_spec(small_problem_data()))
 
 
 def _rel(a: torch.Tensor, b: torch.Tensor) -> float:
@@ -80,7 +72,7 @@ class _Branching:
 def test_branch_on_theta_falls_back_to_eager(caplog) -> None:  # noqa: ANN001
     theta = torch.tensor([1.0, 2.0], dtype=torch.float64)
     jac = CompiledJacobian(_Branching(), backend="graph")
-    with caplog.at_level(logging.WARNING, logger="lensopt.optim.compiled_jacobian"):
+    with caplog.at_level(logging.WARNING, logger="lensopt.accel.jacobian"):
         J, r = jac(theta)
     assert not jac.compiled and jac.failed and "eager" in caplog.text
     torch.testing.assert_close(J, torch.diag(2 * theta), rtol=0, atol=0)  # d(θ²)/dθ = 2θ
@@ -101,8 +93,8 @@ def test_inductor_compiled_jacobian_equals_eager_on_cooke() -> None:
 # ------------------------------------------------------------------------------ AOT packages per problem
 
 def test_problem_key_follows_what_the_residual_function_is_made_of(make_cooke, monkeypatch) -> None:  # noqa: ANN001
-    from lensopt.optics.backend import use_backend
-    from lensopt.optim.compiled_jacobian import problem_key
+    from lensopt import accel
+    from lensopt.accel.jacobian import problem_key
 
     key = problem_key(_small_problem(make_cooke))
     assert key is not None and key == problem_key(_small_problem(make_cooke))  # rebuilt from the same spec
@@ -118,18 +110,17 @@ def test_problem_key_follows_what_the_residual_function_is_made_of(make_cooke, m
     changed.append(build_problem(parse_spec(data), seed=1))  # another pupil jitter
     keys = [problem_key(p) for p in changed]
     assert None not in keys and len({key, *keys}) == 4
-    p = _small_problem(make_cooke)
-    with use_backend("compiled"):  # the trace backend can change the captured graph
-        assert problem_key(p) not in (key, None)
+    data = _small_data(make_cooke)
+    # the trace backend can change the captured graph
+    assert problem_key(build_problem(parse_spec(data), engine=accel.engine("compiled"))) not in (key, None)
     for name in ("eager", "auto"):  # under jacfwd, auto traces eagerly: one graph, one package
-        with use_backend(name):
-            assert problem_key(p) == key
+        assert problem_key(build_problem(parse_spec(data), engine=accel.engine(name))) == key
 
 
 def test_problem_key_refuses_what_it_cannot_fingerprint(make_cooke) -> None:  # noqa: ANN001
     import hashlib
 
-    from lensopt.optim.compiled_jacobian import _feed, problem_key
+    from lensopt.accel.jacobian import _feed, problem_key
 
     with pytest.raises(TypeError, match="cannot fingerprint"):
         _feed(hashlib.sha256(), {"weight": lambda t: t})  # a callable could hold any state
@@ -139,7 +130,7 @@ def test_problem_key_refuses_what_it_cannot_fingerprint(make_cooke) -> None:  # 
 
 
 def test_a_damaged_package_falls_back_to_eager(make_cooke, monkeypatch, tmp_path, caplog) -> None:  # noqa: ANN001
-    from lensopt.optim import compiled_jacobian as cj
+    from lensopt.accel import jacobian as cj
 
     monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
     p = _small_problem(make_cooke)
@@ -148,7 +139,7 @@ def test_a_damaged_package_falls_back_to_eager(make_cooke, monkeypatch, tmp_path
     path.parent.mkdir(parents=True)
     path.write_bytes(b"PK\x03\x04 not a package")  # truncated / foreign file under this problem's name
     jac = CompiledJacobian(p)
-    with caplog.at_level(logging.WARNING, logger="lensopt.optim.compiled_jacobian"):
+    with caplog.at_level(logging.WARNING, logger="lensopt.accel.jacobian"):
         J, r = jac(p.theta0)
     assert not jac.compiled and jac.failed and "eager" in caplog.text
     J0, r0 = p.jacobian(p.theta0)
@@ -166,7 +157,7 @@ def test_aot_package_is_built_once_and_loaded_by_another_process(make_cooke, mon
     import subprocess
     import sys
 
-    from lensopt.optim import compiled_jacobian as cj
+    from lensopt.accel import jacobian as cj
 
     monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
     p = _small_problem(make_cooke)
@@ -186,7 +177,7 @@ import json, sys, torch
 sys.path.insert(0, {str(Path(__file__).parent)!r})
 from test_compiled_jacobian import _small_problem
 from conftest import cooke_data
-from lensopt.optim.compiled_jacobian import CompiledJacobian
+from lensopt.accel.jacobian import CompiledJacobian
 p = _small_problem(cooke_data)
 jac = CompiledJacobian(p)
 theta = p.theta0 + 0.01 * torch.linspace(-1, 1, 6, dtype=torch.float64)
@@ -195,7 +186,7 @@ J0, r0 = p.jacobian(theta)
 print(json.dumps({{"source": jac.source, "failed": jac.failed,
                    "dj": float((J - J0).abs().max() / J0.abs().max())}}))
 """
-    env = {**os.environ, "TORCHINDUCTOR_CACHE_DIR": str(tmp_path)}
+    env = {**os.environ, "TORCHINDUCTOR_CACHE_DIR": str(tmp_path), "PYTHONPATH": str(ROOT)}
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     got = json.loads(out.stdout.strip().splitlines()[-1])
@@ -203,7 +194,7 @@ print(json.dumps({{"source": jac.source, "failed": jac.failed,
 
 
 def test_a_failed_build_is_remembered_across_processes(make_cooke, monkeypatch, tmp_path, caplog) -> None:  # noqa: ANN001
-    from lensopt.optim import compiled_jacobian as cj
+    from lensopt.accel import jacobian as cj
 
     monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
     calls: list[str] = []
@@ -222,7 +213,7 @@ def test_a_failed_build_is_remembered_across_processes(make_cooke, monkeypatch, 
     marker = cj.package_path(cj.problem_key(p)).with_suffix(".failed")
     assert "stand-in" in marker.read_text()
     monkeypatch.setattr(cj, "_broken", set())  # as in a new process
-    with caplog.at_level(logging.WARNING, logger="lensopt.optim.compiled_jacobian"):
+    with caplog.at_level(logging.WARNING, logger="lensopt.accel.jacobian"):
         J, _ = CompiledJacobian(p)(p.theta0)
     assert len(calls) == 1 and "delete" in caplog.text and str(marker) in caplog.text  # no second build
     torch.testing.assert_close(J, J0, rtol=0, atol=0)

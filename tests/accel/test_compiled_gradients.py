@@ -15,8 +15,8 @@ import pytest
 import torch
 from torch import Tensor
 
-from lensopt.optics import compiled
-from lensopt.optics.compiled import clear_compiled_cache, compiled_trace
+from lensopt.accel import compiled
+from lensopt.accel.compiled import clear_compiled_cache, compiled_trace
 from lensopt.optics.trace import Rays, trace
 from lensopt.spec import build, parse_spec
 

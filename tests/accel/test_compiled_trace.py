@@ -17,34 +17,8 @@ from lensopt.optics import compiled
 from lensopt.optics.compiled import clear_compiled_cache, compiled_trace
 from lensopt.optics.trace import REASONS, Rays, Status, trace
 from lensopt.spec import build, parse_spec
-
-# One lens that exercises every code path of the trace in a single compile: Newton on an even
-# asphere, closed-form sphere and hyperboloid (κ < −1), a clipping clear aperture, a diffractive
-# surface, TIR at the glass–air exits, rays that miss, and rays where Newton does not converge.
-MIXED = {
-    "name": "mixed",
-    "system": {"aperture": {"epd": 12.0}, "field": {"hfov_deg": 10.0, "relative": [0.0, 1.0]}, "object": "infinity"},
-    "spectrum": {"wavelengths_nm": [486.1, 587.6, 656.3], "reference_nm": 587.6},
-    "surfaces": [
-        {"type": "asphere", "radius": 15.0, "conic": -0.5, "coefficients": {4: -4e-4, 6: 2e-6}, "thickness": 4.0,
-         "material": "N-BK7"},
-        {"type": "sphere", "radius": -40.0, "thickness": 2.0, "stop": True},
-        {"type": "conic", "radius": -20.0, "conic": -2.5, "thickness": 2.0, "material": "N-SF5",
-         "semi_diameter": 8.0, "clip": True},
-        {"type": "diffractive", "base": {"type": "plane"}, "phase": {2: -30.0, 4: 0.05},
-         "design_wavelength_nm": 587.6, "thickness": 30.0},
-    ],
-}
-
-
-def _rays(n: int = 400) -> Rays:
-    """Rays from z = −2 mm over a ±9 mm square at 0–60° in the meridional plane, random wavelengths."""
-    g = torch.Generator().manual_seed(1)
-    xy = (torch.rand(n, 2, generator=g, dtype=torch.float64) * 2 - 1) * 9.0
-    ang = torch.deg2rad(torch.rand(n, generator=g, dtype=torch.float64) * 60.0)
-    d = torch.stack([torch.zeros_like(ang), torch.sin(ang), torch.cos(ang)], -1)
-    pos = torch.cat([xy, torch.full((n, 1), -2.0, dtype=torch.float64)], -1)
-    return Rays(pos=pos, dir=d, wavelength=torch.randint(0, 3, (n,), generator=g))
+from tests.helpers import MIXED
+from tests.helpers import mixed_rays as _rays
 
 
 def _close(a: torch.Tensor, b: torch.Tensor, rtol: float = 2e-14) -> bool:
@@ -102,7 +76,7 @@ def test_falls_back_to_eager_when_compilation_fails(monkeypatch, caplog) -> None
     monkeypatch.setattr(compiled.torch, "compile", broken_compile)
     lens = build(parse_spec(MIXED)).lens
     rays = _rays(50)
-    with caplog.at_level(logging.WARNING, logger="lensopt.optics.compiled"):
+    with caplog.at_level(logging.WARNING, logger="lensopt.accel.compiled"):
         out = compiled_trace(lens, rays)
     eager = trace(lens, rays)
     assert torch.equal(out.pos, eager.pos) and torch.equal(out.status, eager.status)
@@ -113,7 +87,7 @@ def test_falls_back_to_eager_when_compilation_fails(monkeypatch, caplog) -> None
 
 
 def test_component_major_rays_keep_their_values_and_skip_the_copy() -> None:
-    from lensopt.optics.compiled import _component_major, component_major_rays
+    from lensopt.accel.compiled import _component_major, component_major_rays
 
     g = torch.Generator().manual_seed(1)
     pos = torch.randn(5, 7, 3, generator=g, dtype=torch.float64)

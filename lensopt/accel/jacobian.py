@@ -12,7 +12,7 @@ fused C++ loops.
 Backends:
 
 - ``aot`` (the default on the CPU): the graph is exported and compiled by AOTInductor into a package
-  (a ``.pt2`` zip holding a shared library) in ``optics.aot.package_dir()``, next to the trace packages,
+  (a ``.pt2`` zip holding a shared library) in ``accel.aot.package_dir()``, next to the trace packages,
   keyed by a digest of everything the residual function is built from (``problem_key``: the problem's
   setup — lens, system, media, variables, solves, settings —, its seed, the trace backend, the torch
   version and the source of the library). The first process builds it (capture + export + compile:
@@ -50,18 +50,18 @@ import time
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import torch
 from torch import Tensor
 
+from lensopt.accel import aot
 from lensopt.files import atomic_path, write_text_atomic
-from lensopt.optics import aot
-from lensopt.optics.backend import current_backend
 
-if TYPE_CHECKING:
-    from lensopt.optim.problem import Problem
+Problem = Any
+"""An ``optim.problem.Problem`` (the compiled Jacobian uses its residual function, Jacobian, evaluation,
+setup, settings, seed, objective and engine; typed loosely so that this package sits below ``optim``)."""
 
 __all__ = ["CompiledJacobian", "capture_jacobian", "problem_key", "package_path", "build_package"]
 
@@ -158,8 +158,8 @@ def problem_key(problem: Problem) -> str | None:
         return None
     h = hashlib.sha256()
     try:
-        # Under a forward-mode transform ``auto`` traces eagerly (optics.backend): only ``compiled`` differs.
-        backend = "compiled" if current_backend() == "compiled" else "eager"
+        # Under a forward-mode transform ``auto`` traces eagerly (accel.dispatch): only ``compiled`` differs.
+        backend = "compiled" if problem.engine.trace_backend == "compiled" else "eager"
         _feed(h, (problem.setup, problem.opt, problem.seed, problem.objective, backend,
                   str(problem.dtype), problem.device.type, torch.__version__, _library()))
     except (TypeError, AttributeError) as err:

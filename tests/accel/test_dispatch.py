@@ -1,6 +1,7 @@
-"""The trace backend choice (``optics.backend``): compiled and eager give the same numbers through the
-library path (bundles, reports, the CLI), ``auto`` compiles only once enough rays were traced and
-never inside forward-mode transforms, bad names are one line and exit 2.
+"""The trace backend choice (``accel.dispatch``, reached through an ``Engine``): compiled and eager give the
+same numbers through the library path (bundles, reports, the CLI), ``auto`` decides from the call alone
+(its ray count and the packages on disk, never what the process traced before) and never compiles inside
+forward-mode transforms, bad names are one line and exit 2.
 
 Oracle: the eager ``trace`` (validated against optiland elsewhere); the compiled graph must reproduce
 it to rounding, 1e-12 mm on every ray intercept, with identical failure statuses.
@@ -9,36 +10,33 @@ it to rounding, 1e-12 mm on every ray intercept, with identical failure statuses
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 import torch
 from typer.testing import CliRunner
 
+from lensopt import accel
+from lensopt.accel import aot, dispatch
+from lensopt.accel.dispatch import choose_backend, trace_with
 from lensopt.cli.app import app
+from lensopt.cli.common import make_engine
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
-from lensopt.optics import aot, backend
-from lensopt.optics.backend import choose_backend, current_backend, on_compile, trace_with, use_backend
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.intersect import NEWTON_ITERATIONS
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec import build, load_spec
+from tests.helpers import CMOUNT, COOKE, MIXED, mixed_rays
 
-ROOT = Path(__file__).resolve().parents[2]
-CMOUNT = ROOT / "lenses" / "cmount_4p.json"
-COOKE = ROOT / "specs" / "cooke_triplet.toml"
 runner = CliRunner()
+EAGER = accel.engine("eager")
+AUTO = accel.engine()
 
 
 @pytest.fixture(autouse=True)
-def _fresh_counts(monkeypatch):
-    # Each test starts with auto knowing nothing of this process: no rays counted and no structure
-    # compiled by an earlier test (the slow compile tests would otherwise turn later auto choices to
-    # ``compiled`` when the file runs with ``-m "slow or not slow"``).
-    backend.reset_auto_counts()
-    monkeypatch.setattr(backend, "_compiled_keys", set())
-    yield
-    backend.reset_auto_counts()
+def _fresh_compiles(monkeypatch):
+    # No structure counts as compiled by an earlier test (the first compilation is reported).
+    monkeypatch.setattr(dispatch, "_compiled_keys", set())
 
 
 def _assert_bundles_agree(eager, fast, ok: torch.Tensor) -> None:
@@ -57,17 +55,13 @@ def test_compiled_bundle_equals_eager_to_1e12_mm_and_first_compile_is_reported_o
     model = build(load_spec(CMOUNT))
     lens, system = model.lens, model.system
     pupil = PupilSampling.parse("rings:12").points(dtype=lens.dtype)
-    monkeypatch.setattr(backend, "compile_log_path", lambda: tmp_path / "lensopt_compiles.json")
-    monkeypatch.setattr(backend, "_compiled_keys", set())
+    monkeypatch.setattr(dispatch, "compile_log_path", lambda: tmp_path / "lensopt_compiles.json")
     monkeypatch.setattr(aot, "package_dir", lambda: tmp_path / "no_packages")  # torch.compile, not a package
     seen: list[tuple[str, float]] = []
-    remove = on_compile(lambda desc, s: seen.append((desc, s)))
-    try:
-        eager = trace_bundle(lens, system, pupil, half_pupil=True, record=True, backend="eager")
-        fast = trace_bundle(lens, system, pupil, half_pupil=True, record=True, backend="compiled")
-        again = trace_bundle(lens, system, pupil, half_pupil=True, record=True, backend="compiled")
-    finally:
-        remove()
+    compiled = accel.engine("compiled", on_compile=lambda desc, s: seen.append((desc, s)))
+    eager = trace_bundle(lens, system, pupil, half_pupil=True, record=True, engine=EAGER)
+    fast = trace_bundle(lens, system, pupil, half_pupil=True, record=True, engine=compiled)
+    again = trace_bundle(lens, system, pupil, half_pupil=True, record=True, engine=compiled)
     ok = eager.result.valid
     assert ok.sum() > 0.9 * ok.numel()
     _assert_bundles_agree(eager, fast, ok)
@@ -78,25 +72,20 @@ def test_compiled_bundle_equals_eager_to_1e12_mm_and_first_compile_is_reported_o
     assert len(log) == 1
 
 
-def test_auto_is_eager_until_enough_rays_then_compiled(monkeypatch) -> None:
+def test_auto_decides_from_the_call_alone(monkeypatch) -> None:
     lens = build(load_spec(COOKE)).lens
-    monkeypatch.setattr(backend, "AUTO_MIN_RAYS", 1000)
+    monkeypatch.setattr(dispatch, "AUTO_MIN_RAYS", 1000)
     assert choose_backend(lens, 600) == "eager"
-    assert choose_backend(lens, 300) == "eager"  # 900 so far
-    assert choose_backend(lens, 300) == "compiled"  # 1200 > 1000: compiling has paid
-    # Another structure (recorded hits) counts on its own.
-    assert choose_backend(lens, 600, record=True) == "eager"
-    with use_backend("eager"):
-        assert choose_backend(lens, 10**9) == "eager"
-    with use_backend("compiled"):
-        assert current_backend() == "compiled"
-        assert choose_backend(lens, 1) == "compiled"
-    assert current_backend() == "auto"
+    assert choose_backend(lens, 600) == "eager"  # the same call again: nothing was counted
+    assert choose_backend(lens, 1001) == "compiled"  # one call large enough to pay for a compilation
+    assert choose_backend(lens, 600) == "eager"  # and after it, a small call is eager again
+    assert choose_backend(lens, 10**9, backend="eager") == "eager"
+    assert choose_backend(lens, 1, backend="compiled") == "compiled"
 
 
 def test_auto_stays_eager_inside_forward_mode_jacobians(monkeypatch) -> None:
     lens = build(load_spec(COOKE)).lens
-    monkeypatch.setattr(backend, "AUTO_MIN_RAYS", 0)
+    monkeypatch.setattr(dispatch, "AUTO_MIN_RAYS", 0)
     chosen: list[str] = []
 
     def f(c: torch.Tensor) -> torch.Tensor:
@@ -108,14 +97,37 @@ def test_auto_stays_eager_inside_forward_mode_jacobians(monkeypatch) -> None:
     assert choose_backend(lens, 1) == "compiled"  # outside the transform the threshold applies
 
 
+def test_an_engine_without_the_compiled_traces_traces_eagerly(monkeypatch) -> None:
+    """The library's default engine (and any engine without a ``tracer``) never reaches the dispatcher: plain
+    eager traces, whatever its backend says."""
+    model = build(load_spec(COOKE))
+
+    def never(*args: object, **kwargs: object) -> str:
+        raise AssertionError("the dispatcher was consulted")
+
+    monkeypatch.setattr(dispatch, "choose_backend", never)
+    pupil = PupilSampling.parse("rings:4").points(dtype=model.lens.dtype)
+    plain = trace_bundle(model.lens, model.system, pupil, half_pupil=True, engine=Engine(backend="compiled"))
+    default = trace_bundle(model.lens, model.system, pupil, half_pupil=True)
+    assert Engine(backend="compiled").trace_backend == "eager"
+    assert torch.equal(plain.result.pos, default.result.pos)
+
+
 def test_env_default_and_bad_names(monkeypatch) -> None:
+    # The CLI reads LENSOPT_BACKEND (and LENSOPT_MAX_MEMORY) when it makes a command's engine; the
+    # library never reads the environment.
     monkeypatch.setenv("LENSOPT_BACKEND", "eager")
-    assert current_backend() == "eager"
+    assert make_engine().backend == "eager"
+    assert make_engine("compiled").backend == "compiled"  # a command's --backend wins
     monkeypatch.setenv("LENSOPT_BACKEND", "fast")
     with pytest.raises(LensoptError, match="LENSOPT_BACKEND"):
-        current_backend()
+        make_engine()
+    monkeypatch.setenv("LENSOPT_BACKEND", "compiled")
+    assert Engine().backend == "auto"  # the library's default does not see it
     with pytest.raises(LensoptError, match="backend"):
-        trace_with(build(load_spec(COOKE)).lens, None, backend="fast")  # type: ignore[arg-type]
+        Engine(backend="fast")
+    bad = runner.invoke(app, ["plot", "layout", str(COOKE), "-o", "x.png"], env={"LENSOPT_BACKEND": "fast"})
+    assert bad.exit_code == 2 and "LENSOPT_BACKEND" in bad.output, bad.output
 
 
 def test_cli_bad_backend_is_one_line() -> None:
@@ -139,7 +151,7 @@ def test_cli_trace_same_numbers_on_both_backends() -> None:
 
 
 def test_compiled_calls_get_one_fixed_shape_and_the_padding_is_cut_off(monkeypatch) -> None:
-    """The chunking around the compiled kernels (``backend._compiled_in_chunks``): every kernel call gets
+    """The chunking around the compiled kernels (``dispatch._compiled_in_chunks``): every kernel call gets
     exactly ``size`` rays (``COMPILED_CHUNK``, ``aot.AOT_CHUNK``) in the same layout, whatever the batch;
     the result is the one-pass trace's, bit for bit (the kernel stand-in here is the eager trace itself:
     elementwise IEEE arithmetic does not depend on how the rays are split or padded), for a batch of
@@ -157,17 +169,16 @@ def test_compiled_calls_get_one_fixed_shape_and_the_padding_is_cut_off(monkeypat
         return trace(lens, rays, **kw)
 
     captured = []
-    real = backend.trace_with
-    monkeypatch.setattr("lensopt.optics.bundle.trace_with",
-                        lambda lens, rays, **kw: captured.append(rays) or real(lens, rays, **kw))
-    trace_bundle(lens, system, pupil, half_pupil=True, backend="eager")
+    real = dispatch.trace_with
+    tracer = Engine(backend="eager", tracer=lambda lens, rays, **kw: captured.append(rays) or real(lens, rays, **kw))
+    trace_bundle(lens, system, pupil, half_pupil=True, engine=tracer)
     rays = captured[-1]  # (F, W, P, 3) positions, (1, W, 1) wavelengths: broadcast
     n = torch.broadcast_shapes(rays.pos.shape[:-1], rays.wavelength.shape).numel()
     for chunk, record in ((97, True), (1000, False), (4 * n, True)):  # many chunks; short last; one padded
         seen.clear()
         ref = trace(lens, rays, record=record)
-        got = backend._compiled_in_chunks(kernel, lens, rays, size=chunk, record=record, upto=None,
-                                          newton_iterations=NEWTON_ITERATIONS)
+        got = dispatch._compiled_in_chunks(kernel, lens, rays, size=chunk, record=record, upto=None,
+                                           newton_iterations=NEWTON_ITERATIONS)
         assert len(seen) == -(-n // chunk)
         assert {s for s in seen} == {(torch.Size([chunk, 3]), (1, chunk), (1, chunk), torch.Size([chunk]))}
         for a, b in ((ref.pos, got.pos), (ref.dir, got.dir), (ref.status, got.status),
@@ -180,20 +191,18 @@ def test_compiled_calls_get_one_fixed_shape_and_the_padding_is_cut_off(monkeypat
 
 @pytest.mark.slow  # builds an AOT package: 32 s on a machine with none (issue 14: ≤ 20 s a test)
 def test_aot_package_equals_eager_to_1e12_mm_with_every_failure_reason() -> None:
-    """An AOT package (``optics.aot``) of the lens that takes every code path of the trace (Newton on an
+    """An AOT package (``accel.aot``) of the lens that takes every code path of the trace (Newton on an
     asphere, a clipped hyperboloid, a diffractive surface; misses, TIR, Newton failures, clipping), with
     recorded hits, against the eager trace: 1e-12 mm on every intercept, identical statuses and failure
     surfaces, for a batch of several chunks (the last one padded). The package is built once per machine
     (tens of seconds of CPU) in the default package folder, so later runs only load it."""
-    from test_compiled_trace import MIXED, _rays
-
     from lensopt.optics.trace import REASONS, Status, trace
     from lensopt.spec import parse_spec
 
     lens = build(parse_spec(MIXED)).lens
     if not aot.has_package(lens, record=True):
         aot.build_package(lens, record=True)
-    rays = _rays(2 * aot.AOT_CHUNK + 1000)
+    rays = mixed_rays(2 * aot.AOT_CHUNK + 1000)
     with torch.no_grad():
         assert choose_backend(lens, rays.pos.shape[0], record=True) == "aot"  # auto, a package on disk
         eager = trace(lens, rays, record=True)
@@ -233,28 +242,28 @@ def test_aot_bundle_equals_eager_to_1e12_mm_on_the_cmount_lens() -> None:
         aot.build_package(lens, record=True)
     pupil = PupilSampling.parse("rings:32").points(dtype=lens.dtype)
     with torch.no_grad():
-        eager = trace_bundle(lens, system, pupil, half_pupil=True, record=True, backend="eager")
-        fast = trace_bundle(lens, system, pupil, half_pupil=True, record=True)  # auto: the package
+        eager = trace_bundle(lens, system, pupil, half_pupil=True, record=True, engine=EAGER)
+        fast = trace_bundle(lens, system, pupil, half_pupil=True, record=True, engine=AUTO)  # auto: the package
     assert choose_backend(lens, 10**5, record=True) == "aot"
     ok = eager.result.valid
     _assert_bundles_agree(eager, fast, ok)
 
 
-def test_auto_sends_small_calls_to_a_package_only_once_it_is_loaded(tmp_path, monkeypatch) -> None:
-    """``AOT_MIN_RAYS``: loading a package costs milliseconds, so a small call does not load one; once
-    loaded (by a larger call) the package takes calls of any size. (Stand-in package files and loader:
-    only the choice is tested here.)"""
+def test_auto_sends_a_call_to_a_package_by_its_size_alone(tmp_path, monkeypatch) -> None:
+    """``AOT_MIN_RAYS``: loading a package costs milliseconds, so a small call does not use one, whether or
+    not an earlier call of the process loaded it (the choice depends on the call alone). (Stand-in package
+    files and loader: only the choice is tested here.)"""
     monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
     lens = build(load_spec(COOKE)).lens
     path = aot.package_path(lens)
     path.parent.mkdir(parents=True)
     path.write_bytes(b"stand-in")
     monkeypatch.setattr(aot, "_loaded", {})
-    assert choose_backend(lens, backend.AOT_MIN_RAYS - 1) == "eager"
-    assert choose_backend(lens, backend.AOT_MIN_RAYS) == "aot"
+    assert choose_backend(lens, dispatch.AOT_MIN_RAYS - 1) == "eager"
+    assert choose_backend(lens, dispatch.AOT_MIN_RAYS) == "aot"
     aot._loaded[path] = object()  # what the first aot_trace call does
-    assert choose_backend(lens, 9) == "aot"
-    assert choose_backend(lens, 9, record=True) == "eager"  # another structure, no package
+    assert choose_backend(lens, 9) == "eager"
+    assert choose_backend(lens, dispatch.AOT_MIN_RAYS, record=True) == "eager"  # another structure, no package
 
 
 def test_a_damaged_package_falls_back_to_eager_once(tmp_path, monkeypatch, caplog) -> None:
@@ -270,10 +279,10 @@ def test_a_damaged_package_falls_back_to_eager_once(tmp_path, monkeypatch, caplo
     path.write_bytes(b"not a package")
     pupil = PupilSampling.parse("rings:32").points(dtype=lens.dtype)
     with torch.no_grad():
-        eager = trace_bundle(lens, model.system, pupil, half_pupil=True, backend="eager")
+        eager = trace_bundle(lens, model.system, pupil, half_pupil=True, engine=EAGER)
         assert choose_backend(lens, 10**5) == "aot"
-        with caplog.at_level("WARNING", logger="lensopt.optics.backend"):
-            got = trace_bundle(lens, model.system, pupil, half_pupil=True)
+        with caplog.at_level("WARNING", logger="lensopt.accel.dispatch"):
+            got = trace_bundle(lens, model.system, pupil, half_pupil=True, engine=AUTO)
     assert torch.equal(got.result.pos, eager.result.pos) and torch.equal(got.result.status, eager.result.status)
     assert str(path) in caplog.text
     assert choose_backend(lens, 10**5) == "eager"

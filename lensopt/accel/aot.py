@@ -1,13 +1,13 @@
 """Ahead-of-time compiled trace packages: compile a lens structure once per machine, load it in milliseconds.
 
-``torch.compile`` (``optics.compiled``) pays Dynamo's tracing and Inductor's cache look-ups in *every*
+``torch.compile`` (``accel.compiled``) pays Dynamo's tracing and Inductor's cache look-ups in *every*
 process: ≈ 20 s per structure on the loaded 2-core machine even with a warm on-disk cache
 (benchmarks/RESULTS.md, issue 13 session 21), while the commands' eager traces take under a second. So
 those commands could never use it. AOTInductor instead writes the compiled kernel into a package (a
 ``.pt2`` zip holding a shared library), built from one fixed input shape: ``AOT_CHUNK`` rays in the
 component-major layout of ``compiled.component_major_rays``. A later process loads it through
 ``torch._C._aoti`` (no Dynamo, no Inductor import) in milliseconds, and the trace helper
-(``optics.backend``) feeds it fixed chunks, the last one padded.
+(``accel.dispatch``) feeds it fixed chunks, the last one padded.
 
 Packages live in ``$TORCHINDUCTOR_CACHE_DIR/lensopt_aot/`` (default ``/tmp/torchinductor_$USER``), next
 to Inductor's cache, one per *structure*: surface kinds, stop, ``upto``, ``record``, Newton cap, dtype,
@@ -80,7 +80,7 @@ def package_dir() -> Path:
 def _sources() -> str:
     global _source_hash
     if _source_hash is None:
-        here = Path(__file__).resolve().parent
+        here = Path(__file__).resolve().parents[1] / "optics"
         h = hashlib.sha256()
         for name in _SOURCES:
             h.update((here / name).read_bytes())
@@ -204,7 +204,7 @@ def build_package(lens: Lens, *, upto: int | None = None, record: bool = False,
 
 def load_package(path: Path) -> Any:
     """The loaded runner of the package at ``path`` (loaded once per process; ``.run(list of tensors)``).
-    Also used for the LM Jacobian's packages (``optim.compiled_jacobian``)."""
+    Also used for the LM Jacobian's packages (``accel.jacobian``)."""
     runner = _loaded.get(path)
     if runner is None:
         # (package, model name, run single-threaded, runners, device index): the C++ loader, no Python
