@@ -159,25 +159,33 @@ def run_simulate(
     timings["write image"] = time.perf_counter() - t0
     metrics = None
     if reference is not None or score:
-        from lensopt.imaging.io import linear_to_srgb
-        from lensopt.imaging.metrics import psnr, ssim  # skimage (and scipy) only when scoring
+        import lensopt.imaging.metrics  # noqa: F401 - skimage (and scipy), imported only when scoring, untimed
 
         t0 = time.perf_counter()
-        if reference is not None:
-            ref, _ = read_image(reference, option="--reference", engine=engine)
-            if ref.shape != res.image.shape:
-                raise LensoptError(f"must have the simulated image's shape {res.image.shape}", path="--reference",
-                                   got=ref.shape)
-            against = str(reference)
-        else:
-            ref, against = img, "the input scene"
-        metrics = {"against": against, "psnr_db": psnr(ref, res.image, transform=linear_to_srgb),
-                   "ssim": ssim(ref, res.image, transform=linear_to_srgb), "space": "sRGB-encoded [0, 1]"}
+        metrics = _score(res.image, img if reference is None else None, reference, engine)
         timings["scores (PSNR, SSIM)"] = time.perf_counter() - t0
     return {"plan": plan_json, "timings": timings, "output": str(output), "output_encoding": encoding,
             "input_encoding": f"{info.encoding} {info.bits}-bit {'float' if info.is_float else 'integer'}"
                               + (" (linearized)" if info.encoding == "sRGB" else ""),
             "metrics": metrics}
+
+
+def _score(image: Any, scene: Any, reference: Path | None, engine: Engine | None) -> dict[str, Any]:
+    """PSNR and SSIM (sRGB-encoded) of the simulated ``image`` against ``reference`` (a file of its shape) or
+    else against the input ``scene``."""
+    from lensopt.imaging.io import linear_to_srgb, read_image
+    from lensopt.imaging.metrics import psnr, ssim  # skimage (and scipy) only when scoring
+
+    if reference is not None:
+        ref, _ = read_image(reference, option="--reference", engine=engine)
+        if ref.shape != image.shape:
+            raise LensoptError(f"must have the simulated image's shape {image.shape}", path="--reference",
+                               got=ref.shape)
+        against = str(reference)
+    else:
+        ref, against = scene, "the input scene"
+    return {"against": against, "psnr_db": psnr(ref, image, transform=linear_to_srgb),
+            "ssim": ssim(ref, image, transform=linear_to_srgb), "space": "sRGB-encoded [0, 1]"}
 
 
 def render_plan(p: dict[str, Any]) -> None:

@@ -65,30 +65,13 @@ def tolerance_cmd(
 ) -> None:
     """Tolerancing: sensitivity table, inverse sensitivity, RSS prediction, Monte Carlo with yields,
     back-focus compensator; plots and worst trials with --output-dir."""
-    from lensopt.spec.io import load_tolerances
-    from lensopt.spec.tolerance import ToleranceSpec
-
     engine = make_engine()
     model = load_model(lens)
-    base = load_tolerances(tolerances) if tolerances is not None else model.spec.tolerance
-    if base is None:
-        if profile is None:
-            raise LensoptError("the lens has no [tolerance] section; give --tolerances FILE or --profile s6.2",
-                               path="--tolerances")
-        base = ToleranceSpec(profile="s6.2")
     if irm is not None and metric is None:
         metric = "psnr"
-    changes = {k: v for k, v in {"profile": profile, "trials": trials, "seed": seed, "metric": metric,
-                                 "mtf_frequency": mtf_frequency, "sampling": sampling,
-                                 "compensator": compensator, "aim": aim,
-                                 "fields": None if fields is None else parse_fields(fields)}.items()
-               if v is not None}
-    try:
-        settings = ToleranceSpec.model_validate({**base.model_dump(), **changes})
-    except Exception as err:  # pydantic ValidationError → one line naming the option
-        first = err.errors()[0] if hasattr(err, "errors") else {"loc": (), "msg": str(err)}
-        where = "--" + str(first["loc"][0]).replace("_", "-") if first["loc"] else "--tolerances"
-        raise LensoptError(first["msg"], path=where) from None
+    settings = _settings(model, tolerances, profile, {
+        "profile": profile, "trials": trials, "seed": seed, "metric": metric, "mtf_frequency": mtf_frequency,
+        "sampling": sampling, "compensator": compensator, "aim": aim, "fields": fields})
     sched = None if scheduler == "serial" else scheduler
     hook = None
     if irm is not None:
@@ -107,6 +90,30 @@ def tolerance_cmd(
         print_json(report)
     else:
         _render(report)
+
+
+def _settings(model: Any, tolerances: Path | None, profile: str | None, options: dict[str, Any]) -> Any:
+    """The study's ``ToleranceSpec``: ``--tolerances`` FILE, else the spec's ``[tolerance]``, else the named
+    ``--profile``, with the options given on the command line (None: not given; ``fields`` as text) on top;
+    a bad value is one line naming its option."""
+    from lensopt.spec.io import load_tolerances
+    from lensopt.spec.tolerance import ToleranceSpec
+
+    base = load_tolerances(tolerances) if tolerances is not None else model.spec.tolerance
+    if base is None:
+        if profile is None:
+            raise LensoptError("the lens has no [tolerance] section; give --tolerances FILE or --profile s6.2",
+                               path="--tolerances")
+        base = ToleranceSpec(profile="s6.2")
+    if options.get("fields") is not None:
+        options = {**options, "fields": parse_fields(options["fields"])}
+    changes = {k: v for k, v in options.items() if v is not None}
+    try:
+        return ToleranceSpec.model_validate({**base.model_dump(), **changes})
+    except Exception as err:  # pydantic ValidationError → one line naming the option
+        first = err.errors()[0] if hasattr(err, "errors") else {"loc": (), "msg": str(err)}
+        where = "--" + str(first["loc"][0]).replace("_", "-") if first["loc"] else "--tolerances"
+        raise LensoptError(first["msg"], path=where) from None
 
 
 def parse_fields(text: str) -> Any:

@@ -146,19 +146,7 @@ def run_problem(problem: Problem, *, optimizer: str | None = None, steps: int | 
     opt = problem.opt
     method = optimizer or opt.optimizer
     total = steps if steps is not None else opt.steps
-    if problem.num_variables == 0:
-        raise OptimizeError("nothing to optimize: no surface has a vary list", path="surfaces")
-    start = problem.evaluate(problem.theta0)
-    if not start.physical:
-        raise OptimizeError(f"the start lens cannot be optimized: {start.reason}")
-    scale0 = problem.row_scale(0.0)
-    result = OptimizeResult(spec=None, problem=problem, theta=problem.theta0, steps=0, stop_reason="",
-                            interrupted=False, bound=[],
-                            start_esr_um=1e3 * problem.esr_mm(start.residuals),
-                            start_merit=0.5 * float(((scale0 * start.residuals) ** 2).sum()))
-    if problem.image is not None:
-        result.start_esr_um = 1e3 * problem.spot_esr_mm(problem.theta0)
-        result.start_psnr_db = problem.image.held_out_psnr(problem.lens(problem.theta0)[0])
+    result, start = _start(problem)
     bind_step = round(opt.bind_at * total) if bind is not None and problem.num_glasses and opt.bind_at < 1 else None
     state = make_optimizer(problem, problem.theta0, method, jacobian)
     phase = "glasses free" if problem.num_glasses else "fixed glasses"
@@ -185,12 +173,7 @@ def run_problem(problem: Problem, *, optimizer: str | None = None, steps: int | 
             elapsed = time.perf_counter() - t0
             result.history.append((k, elapsed, info.merit, esr))
             if callback is not None:
-                merits = problem.merits(r, scale) if r is not None else {}
-                tot = sum(merits.values()) or 1.0
-                callback(Progress(k, total, phase, info.merit, state.damping, esr, state.accepted, state.rejected,
-                                  info.accepted, {n: m / tot for n, m in merits.items()},
-                                  _valid_fraction(problem, r), event or info.reason, elapsed, image_loss,
-                                  psnr_of_mse(image_loss) if image_loss == image_loss else float("nan")))
+                callback(_progress(problem, state, info, scale, k, total, phase, esr, event, elapsed, image_loss))
             event = ""
             flat = problem.schedules_settled(frac)
             reason = state.stop_reason()
@@ -209,8 +192,46 @@ def run_problem(problem: Problem, *, optimizer: str | None = None, steps: int | 
     except KeyboardInterrupt:
         result.interrupted = True
         result.stop_reason = "interrupted"
+    _finish(result, problem, state.theta)
+    result.elapsed_s = time.perf_counter() - t0
+    return result
+
+
+def _start(problem: Problem) -> tuple[OptimizeResult, Any]:
+    """The result of a run that has not stepped yet (start ESR, merit, held-out PSNR) and the start
+    evaluation; refuses a problem with nothing to vary or an unusable start lens."""
+    if problem.num_variables == 0:
+        raise OptimizeError("nothing to optimize: no surface has a vary list", path="surfaces")
+    start = problem.evaluate(problem.theta0)
+    if not start.physical:
+        raise OptimizeError(f"the start lens cannot be optimized: {start.reason}")
+    scale0 = problem.row_scale(0.0)
+    result = OptimizeResult(spec=None, problem=problem, theta=problem.theta0, steps=0, stop_reason="",
+                            interrupted=False, bound=[],
+                            start_esr_um=1e3 * problem.esr_mm(start.residuals),
+                            start_merit=0.5 * float(((scale0 * start.residuals) ** 2).sum()))
+    if problem.image is not None:
+        result.start_esr_um = 1e3 * problem.spot_esr_mm(problem.theta0)
+        result.start_psnr_db = problem.image.held_out_psnr(problem.lens(problem.theta0)[0])
+    return result, start
+
+
+def _progress(problem: Problem, state, info, scale: torch.Tensor, k: int, total: int,  # noqa: ANN001
+              phase: str, esr: float, event: str, elapsed: float, image_loss: float) -> Progress:
+    """The ``Progress`` record of step ``k`` (each group's share of the merit, the valid rays)."""
+    r = state.residuals
+    merits = problem.merits(r, scale) if r is not None else {}
+    tot = sum(merits.values()) or 1.0
+    return Progress(k, total, phase, info.merit, state.damping, esr, state.accepted, state.rejected,
+                    info.accepted, {n: m / tot for n, m in merits.items()}, _valid_fraction(problem, r),
+                    event or info.reason, elapsed, image_loss,
+                    psnr_of_mse(image_loss) if image_loss == image_loss else float("nan"))
+
+
+def _finish(result: OptimizeResult, problem: Problem, theta: torch.Tensor) -> None:
+    """The final problem and θ into ``result``, with the held-out PSNR and a warning when rays still fail."""
     result.problem = problem
-    result.theta = state.theta
+    result.theta = theta
     if problem.image is not None:
         result.final_psnr_db = problem.image.held_out_psnr(problem.lens(result.theta)[0])
     failed, rays, reasons = problem.failure_summary(result.theta)
@@ -218,8 +239,6 @@ def run_problem(problem: Problem, *, optimizer: str | None = None, steps: int | 
         why = ", ".join(f"{k}: {v}" for k, v in reasons.items())
         result.warning = (f"{failed} of {rays} optimization rays still fail ({why}); the start may be too "
                           "far from a working lens: change it, or run more steps")
-    result.elapsed_s = time.perf_counter() - t0
-    return result
 
 
 def _next_batch(problem: Problem, state, k: int, method: str) -> float:  # noqa: ANN001

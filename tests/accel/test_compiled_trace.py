@@ -13,8 +13,8 @@ import logging
 import pytest
 import torch
 
-from lensopt.optics import compiled
-from lensopt.optics.compiled import clear_compiled_cache, compiled_trace
+from lensopt.accel import compiled
+from lensopt.accel.compiled import clear_compiled_cache, compiled_trace
 from lensopt.optics.trace import REASONS, Rays, Status, trace
 from lensopt.spec import build, parse_spec
 from tests.helpers import MIXED

@@ -60,7 +60,7 @@ def test_warmup_of_a_decentered_lens_is_one_line_exit_2(tmp_path) -> None:
 def test_warmup_jacobian_builds_the_package_optimize_looks_for(tmp_path, monkeypatch) -> None:
     """``--jacobian`` keys the package like ``optimize`` builds its problem (the same spec and seed), so that
     ``optimize --jacobian compiled`` finds it; the build itself is a stand-in here (the slow test in
-    tests/accel/test_jacobian.py builds and loads a real one)."""
+    tests/accel/test_compiled_jacobian.py builds and loads a real one)."""
     import torch
 
     from lensopt.accel import jacobian as cj
