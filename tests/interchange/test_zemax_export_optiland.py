@@ -3,7 +3,7 @@ optiland 0.6.3's Zemax reader has the same EFL and EPD (≤ 1e-9 relative) and s
 same image intercepts (≤ 1e-9 mm), with the same rays stopped. optiland's media are replaced by lensopt's
 indices at the reference wavelength (geometry and system data are compared, not glass databases).
 optiland has no BINARY_2 surface: the diffractive lenses are checked to be refused by it, and are covered
-by the closed-form tests of tests/io/test_zemax_binary2.py."""
+by the closed-form tests of tests/interchange/test_zemax_binary2.py."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Real CODE V files (written by CODE V; see tests/io/data/codev/README.md) import and trace, and their
+"""Real CODE V files (written by CODE V; see tests/interchange/data/codev/README.md) import and trace, and their
 first-order data match what CODE V wrote: PIM-solved back focal distances in the .seq files, and
 CODE V's own listing of the double Gauss (ag_dblgauss.lis: LIS, FIO, SSP output)."""
 

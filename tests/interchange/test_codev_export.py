@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 
 import pytest
@@ -15,13 +14,14 @@ from lensopt.interchange.codev.write import MIN_PRIVATE_WAVELENGTHS, export_code
 from lensopt.materials import find_glass, list_glasses
 from lensopt.optics.paraxial import first_order
 from lensopt.spec import build, load_spec, parse_spec
+from tests.helpers import cooke_data
 
 ROOT = Path(__file__).resolve().parents[2]
 DATA = Path(__file__).parent / "data"
 
 
 def _cooke() -> dict:
-    return tomllib.loads((ROOT / "specs" / "cooke_triplet.toml").read_text())
+    return cooke_data()
 
 
 def test_one_command_per_line_and_no_qualified_forms() -> None:
@@ -119,7 +119,7 @@ def test_every_catalog_glass_has_a_codev_name_that_reads_back() -> None:
 
 
 def test_codev_names_of_known_glasses() -> None:
-    # Spellings as in CODE V files written by CODE V (tests/io/data/codev: NBK7_SCHOTT, NSF5_SCHOTT,
+    # Spellings as in CODE V files written by CODE V (tests/interchange/data/codev: NBK7_SCHOTT, NSF5_SCHOTT,
     # SLAL8_OHARA, STIH53_OHARA, NPSK53A_SCHOTT, NLASF9_SCHOTT).
     for vendor_name, cv in [("schott:N-BK7", "NBK7_SCHOTT"), ("schott:N-SF5", "NSF5_SCHOTT"),
                             ("ohara:S-LAL8", "SLAL8_OHARA"), ("ohara:S-TIH53", "STIH53_OHARA"),

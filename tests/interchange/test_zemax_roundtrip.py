@@ -1,5 +1,5 @@
 """Zemax round trip: lensopt → .zmx → lensopt gives the same lens (≤ 1e-10 mm on image intercepts and on
-every lens tensor) for every lens in specs/ and tests/io/data/, with and without lensopt's NOTE lines;
+every lens tensor) for every lens in specs/ and tests/interchange/data/, with and without lensopt's NOTE lines;
 export → import → export is byte-identical."""
 
 from __future__ import annotations

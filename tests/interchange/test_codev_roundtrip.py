@@ -1,5 +1,5 @@
 """CODE V round trip: export → import → export is byte-identical, and the imported lens traces to the
-same image intercepts as the original (≤ 1e-10 mm), for every lens in specs/ and tests/io/data/.
+same image intercepts as the original (≤ 1e-10 mm), for every lens in specs/ and tests/interchange/data/.
 
 The folder globs pick up lenses other engineers add to specs/ without changes here.
 """
