@@ -3,13 +3,13 @@ tests run on (``--device cpu|cuda``, kornia's habit). Plain values and helpers: 
 
 from __future__ import annotations
 
-from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 import pytest
 import torch
 
-from tests.helpers import CMOUNT, COOKE, cooke_data
+from tests.helpers import CMOUNT, COOKE, cooke_data, cooke_optimize_data
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -26,29 +26,36 @@ def device(request: pytest.FixtureRequest) -> torch.device:
     return dev
 
 
-@pytest.fixture
-def cooke_path() -> Path:
-    """The Cooke triplet spec file (``specs/cooke_triplet.toml``)."""
-    return COOKE
-
-
-@pytest.fixture
-def cooke() -> dict[str, Any]:
-    """The Cooke triplet as fresh plain spec data (edit it freely)."""
-    return cooke_data()
-
-
 @pytest.fixture(scope="session")
-def cooke_model() -> Any:
-    """The Cooke triplet built (``lensopt.spec.Model``: frozen, shared by the session)."""
+def cooke() -> Any:
+    """The Cooke triplet (``specs/cooke_triplet.toml``) built: a ``lensopt.spec.Model`` (frozen, shared by the
+    session). Its file is ``tests.helpers.COOKE``; fresh spec data: ``cooke_dict``."""
     from lensopt.spec import build, load_spec
 
     return build(load_spec(COOKE))
 
 
+@pytest.fixture
+def cooke_dict() -> dict[str, Any]:
+    """The Cooke triplet as fresh plain spec data (edit it freely)."""
+    return cooke_data()
+
+
+@pytest.fixture
+def cooke_opt() -> dict[str, Any]:
+    """The Cooke triplet as fresh spec data with a small ``[optimize]`` section (rings:3, 10 steps)."""
+    return cooke_optimize_data()
+
+
+@pytest.fixture
+def make_cooke() -> Callable[..., dict[str, Any]]:
+    """``make_cooke(**optimize)``: fresh Cooke triplet data with extra ``[optimize]`` settings."""
+    return cooke_optimize_data
+
+
 @pytest.fixture(scope="session")
-def cmount_model() -> Any:
-    """The seed's C-mount lens built (frozen, shared by the session)."""
+def cmount() -> Any:
+    """The seed's C-mount lens (``lenses/cmount_4p.json``) built (frozen, shared by the session)."""
     from lensopt.spec import build, load_spec
 
     return build(load_spec(CMOUNT))

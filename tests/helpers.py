@@ -105,6 +105,50 @@ def small_problem_data() -> dict[str, Any]:
     return data
 
 
+def oval_spec(*, wavelengths_nm: list[float] | None = None, epd: float = 10.0, hfov_deg: float = 0.01,
+              pitch_um: float = 1.0, resolution: tuple[int, int] | None = None, vd: float = 60.0) -> dict[str, Any]:
+    """A single refracting ellipsoid (Cartesian oval) with its far focus on the image surface, in glass:
+    conic κ = −1/n² images an axial point at infinity without aberration (Descartes; e.g. Born & Wolf
+    §4.2.3), so its geometric PSF is a Dirac delta on axis. R = 50 mm, n = 1.5: f' = n R/(n − 1) = 150 mm,
+    NA = n sin u' ≈ EPD/(2 f'/n) = 0.05 for EPD 10 mm. (``oval_model`` puts κ and the image at the model
+    glass's index.)"""
+    n = 1.5
+    sensor: dict[str, Any] = {"pixel_pitch_um": pitch_um}
+    if resolution is not None:
+        sensor["resolution"] = list(resolution)
+    return {
+        "name": "Cartesian oval",
+        "system": {"aperture": {"epd": epd}, "field": {"hfov_deg": hfov_deg, "relative": [0.0, 1.0]}},
+        "spectrum": {"wavelengths_nm": wavelengths_nm or [587.5618]},
+        "sensor": sensor,
+        "surfaces": [{"type": "conic", "radius": 50.0, "conic": -1.0 / n**2, "thickness": n * 50.0 / (n - 1.0),
+                      "material": {"nd": n, "vd": vd}, "stop": True}],
+    }
+
+
+def oval_model(**kw: Any) -> Any:
+    """``oval_spec(**kw)`` built, with κ = −1/n² and the image at n R/(n − 1) for the model glass's index n at
+    the middle wavelength: on axis, the rays of that wavelength meet in a point."""
+    import copy
+
+    from lensopt.spec import build, parse_spec
+
+    spec = oval_spec(**kw)
+    model = build(parse_spec(copy.deepcopy(spec)))
+    n = float(model.lens.index[1, model.lens.index.shape[1] // 2])
+    spec["surfaces"][0]["conic"] = -1.0 / n**2
+    spec["surfaces"][0]["thickness"] = n * 50.0 / (n - 1.0)
+    return build(parse_spec(spec))
+
+
+def imaging_oval(*, rgb: bool = False, **kw: Any) -> Any:
+    """The oval as the imaging tests use it: a field so small (1e-4°) that every PSF stays within a pixel
+    (30 µm, a 64 × 48 sensor unless ``kw`` says otherwise); ``rgb``: 480, 550 and 650 nm."""
+    base = {"hfov_deg": 1e-4, "vd": 100.0, "pitch_um": 30.0, "resolution": (64, 48),
+            "wavelengths_nm": [480.0, 550.0, 650.0] if rgb else None}
+    return oval_model(**{**base, **kw})
+
+
 MIXED: dict[str, Any] = {
     "name": "mixed",
     "system": {"aperture": {"epd": 12.0}, "field": {"hfov_deg": 10.0, "relative": [0.0, 1.0]}, "object": "infinity"},

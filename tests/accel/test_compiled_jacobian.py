@@ -9,7 +9,6 @@ Inductor-compiled graph is checked by the slow test (its compile takes minutes o
 from __future__ import annotations
 
 import logging
-from pathlib import Path
 
 import pytest
 import torch
@@ -21,11 +20,7 @@ from lensopt.spec import load_spec, parse_spec
 from tests.helpers import ROOT, SPECS, small_problem_data
 
 
-def _small_data(make_cooke=None) -> dict:  # noqa: ANN001 - the fixture's argument, unused
-    return small_problem_data()
-
-
-def _small_problem(make_cooke=None) -> Problem:  # noqa: ANN001 - the fixture's argument, unused
+def _small_problem() -> Problem:
     return build_problem(parse_spec(small_problem_data()))
 
 
@@ -33,8 +28,8 @@ def _rel(a: torch.Tensor, b: torch.Tensor) -> float:
     return float((a - b).abs().max() / b.abs().max())
 
 
-def test_captured_graph_equals_eager_jacfwd(make_cooke) -> None:  # noqa: ANN001
-    p = _small_problem(make_cooke)
+def test_captured_graph_equals_eager_jacfwd() -> None:
+    p = _small_problem()
     J0, r0 = p.jacobian(p.theta0)
     assert J0.shape == (p.size, 6) and bool((J0.abs().sum(0) > 0).all())
     assert bool(J0[p.slices["relative_illumination"]].abs().sum() > 0)  # active, so compared below
@@ -69,7 +64,7 @@ class _Branching:
         return torch.func.jacfwd(self.residuals)(theta), self.residuals(theta)
 
 
-def test_branch_on_theta_falls_back_to_eager(caplog) -> None:  # noqa: ANN001
+def test_branch_on_theta_falls_back_to_eager(caplog) -> None:
     theta = torch.tensor([1.0, 2.0], dtype=torch.float64)
     jac = CompiledJacobian(_Branching(), backend="graph")
     with caplog.at_level(logging.WARNING, logger="lensopt.accel.jacobian"):
@@ -92,13 +87,13 @@ def test_inductor_compiled_jacobian_equals_eager_on_cooke() -> None:
 
 # ------------------------------------------------------------------------------ AOT packages per problem
 
-def test_problem_key_follows_what_the_residual_function_is_made_of(make_cooke, monkeypatch) -> None:  # noqa: ANN001
+def test_problem_key_follows_what_the_residual_function_is_made_of(monkeypatch) -> None:
     from lensopt import accel
     from lensopt.accel.jacobian import problem_key
 
-    key = problem_key(_small_problem(make_cooke))
-    assert key is not None and key == problem_key(_small_problem(make_cooke))  # rebuilt from the same spec
-    data = _small_data(make_cooke)
+    key = problem_key(_small_problem())
+    assert key is not None and key == problem_key(_small_problem())  # rebuilt from the same spec
+    data = small_problem_data()
     assert problem_key(build_problem(parse_spec(data))) == key
     changed = []
     data["surfaces"][1]["radius"] *= 1.0 + 1e-12  # a fixed radius, changed in its last digits
@@ -110,30 +105,30 @@ def test_problem_key_follows_what_the_residual_function_is_made_of(make_cooke, m
     changed.append(build_problem(parse_spec(data), seed=1))  # another pupil jitter
     keys = [problem_key(p) for p in changed]
     assert None not in keys and len({key, *keys}) == 4
-    data = _small_data(make_cooke)
+    data = small_problem_data()
     # the trace backend can change the captured graph
     assert problem_key(build_problem(parse_spec(data), engine=accel.engine("compiled"))) not in (key, None)
     for name in ("eager", "auto"):  # under jacfwd, auto traces eagerly: one graph, one package
         assert problem_key(build_problem(parse_spec(data), engine=accel.engine(name))) == key
 
 
-def test_problem_key_refuses_what_it_cannot_fingerprint(make_cooke) -> None:  # noqa: ANN001
+def test_problem_key_refuses_what_it_cannot_fingerprint() -> None:
     import hashlib
 
     from lensopt.accel.jacobian import _feed, problem_key
 
     with pytest.raises(TypeError, match="cannot fingerprint"):
         _feed(hashlib.sha256(), {"weight": lambda t: t})  # a callable could hold any state
-    p = _small_problem(make_cooke)
+    p = _small_problem()
     p.image = object()  # an image objective: its residual function changes with every batch
     assert problem_key(p) is None
 
 
-def test_a_damaged_package_falls_back_to_eager(make_cooke, monkeypatch, tmp_path, caplog) -> None:  # noqa: ANN001
+def test_a_damaged_package_falls_back_to_eager(monkeypatch, tmp_path, caplog) -> None:
     from lensopt.accel import jacobian as cj
 
     monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
-    p = _small_problem(make_cooke)
+    p = _small_problem()
     path = cj.package_path(cj.problem_key(p))
     assert path.parent == tmp_path / "lensopt_aot"
     path.parent.mkdir(parents=True)
@@ -151,7 +146,7 @@ def test_a_damaged_package_falls_back_to_eager(make_cooke, monkeypatch, tmp_path
 
 
 @pytest.mark.slow
-def test_aot_package_is_built_once_and_loaded_by_another_process(make_cooke, monkeypatch, tmp_path) -> None:  # noqa: ANN001
+def test_aot_package_is_built_once_and_loaded_by_another_process(monkeypatch, tmp_path) -> None:
     import json
     import os
     import subprocess
@@ -160,7 +155,7 @@ def test_aot_package_is_built_once_and_loaded_by_another_process(make_cooke, mon
     from lensopt.accel import jacobian as cj
 
     monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
-    p = _small_problem(make_cooke)
+    p = _small_problem()
     jac = CompiledJacobian(p)
     J, r = jac(p.theta0)
     assert jac.compiled and jac.source == "package built", jac.failed
@@ -172,19 +167,19 @@ def test_aot_package_is_built_once_and_loaded_by_another_process(make_cooke, mon
     assert _rel(J1, J0) > 1e-4 and _rel(J2, J1) <= 1e-12 and _rel(r2, r1) <= 1e-12
     assert cj.package_path(cj.problem_key(p)).exists()
     # Another process with the same problem loads the package: no capture, no compile.
-    script = f"""
-import json, sys, torch
-sys.path.insert(0, {str(Path(__file__).parent)!r})
-from test_compiled_jacobian import _small_problem
-from conftest import cooke_data
+    script = """
+import json, torch
+from tests.helpers import small_problem_data
 from lensopt.accel.jacobian import CompiledJacobian
-p = _small_problem(cooke_data)
+from lensopt.design import build_problem
+from lensopt.spec import parse_spec
+p = build_problem(parse_spec(small_problem_data()))
 jac = CompiledJacobian(p)
 theta = p.theta0 + 0.01 * torch.linspace(-1, 1, 6, dtype=torch.float64)
 J, r = jac(theta)
 J0, r0 = p.jacobian(theta)
-print(json.dumps({{"source": jac.source, "failed": jac.failed,
-                   "dj": float((J - J0).abs().max() / J0.abs().max())}}))
+print(json.dumps({"source": jac.source, "failed": jac.failed,
+                   "dj": float((J - J0).abs().max() / J0.abs().max())}))
 """
     env = {**os.environ, "TORCHINDUCTOR_CACHE_DIR": str(tmp_path), "PYTHONPATH": str(ROOT)}
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=300)
@@ -193,7 +188,7 @@ print(json.dumps({{"source": jac.source, "failed": jac.failed,
     assert got["source"] == "package loaded" and not got["failed"] and got["dj"] <= 1e-12
 
 
-def test_a_failed_build_is_remembered_across_processes(make_cooke, monkeypatch, tmp_path, caplog) -> None:  # noqa: ANN001
+def test_a_failed_build_is_remembered_across_processes(monkeypatch, tmp_path, caplog) -> None:
     from lensopt.accel import jacobian as cj
 
     monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
@@ -204,7 +199,7 @@ def test_a_failed_build_is_remembered_across_processes(make_cooke, monkeypatch, 
         raise RuntimeError("C++ compile error (stand-in)")
 
     monkeypatch.setattr(cj, "build_package", failing_build)
-    p = _small_problem(make_cooke)
+    p = _small_problem()
     J0, _ = p.jacobian(p.theta0)
     jac = CompiledJacobian(p)
     J, _ = jac(p.theta0)

@@ -72,8 +72,8 @@ def test_compiled_bundle_equals_eager_to_1e12_mm_and_first_compile_is_reported_o
     assert len(log) == 1
 
 
-def test_auto_decides_from_the_call_alone(monkeypatch) -> None:
-    lens = build(load_spec(COOKE)).lens
+def test_auto_decides_from_the_call_alone(cooke, monkeypatch) -> None:
+    lens = cooke.lens
     monkeypatch.setattr(dispatch, "AUTO_MIN_RAYS", 1000)
     assert choose_backend(lens, 600) == "eager"
     assert choose_backend(lens, 600) == "eager"  # the same call again: nothing was counted
@@ -83,8 +83,8 @@ def test_auto_decides_from_the_call_alone(monkeypatch) -> None:
     assert choose_backend(lens, 1, backend="compiled") == "compiled"
 
 
-def test_auto_stays_eager_inside_forward_mode_jacobians(monkeypatch) -> None:
-    lens = build(load_spec(COOKE)).lens
+def test_auto_stays_eager_inside_forward_mode_jacobians(cooke, monkeypatch) -> None:
+    lens = cooke.lens
     monkeypatch.setattr(dispatch, "AUTO_MIN_RAYS", 0)
     chosen: list[str] = []
 
@@ -97,10 +97,10 @@ def test_auto_stays_eager_inside_forward_mode_jacobians(monkeypatch) -> None:
     assert choose_backend(lens, 1) == "compiled"  # outside the transform the threshold applies
 
 
-def test_an_engine_without_the_compiled_traces_traces_eagerly(monkeypatch) -> None:
+def test_an_engine_without_the_compiled_traces_traces_eagerly(cooke, monkeypatch) -> None:
     """The library's default engine (and any engine without a ``tracer``) never reaches the dispatcher: plain
     eager traces, whatever its backend says."""
-    model = build(load_spec(COOKE))
+    model = cooke
 
     def never(*args: object, **kwargs: object) -> str:
         raise AssertionError("the dispatcher was consulted")
@@ -226,9 +226,9 @@ def test_aot_package_equals_eager_to_1e12_mm_with_every_failure_reason() -> None
     assert choose_backend(lens, 10**6, record=True, grad=True, backend="compiled") == "compiled"
 
 
-def test_auto_without_a_package_stays_eager(tmp_path, monkeypatch) -> None:
+def test_auto_without_a_package_stays_eager(cooke, tmp_path, monkeypatch) -> None:
     monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))  # an empty cache: no package
-    lens = build(load_spec(COOKE)).lens
+    lens = cooke.lens
     assert aot.package_dir() == tmp_path / "lensopt_aot" and not aot.has_package(lens)
     assert choose_backend(lens, 10**6) == "eager"
     assert choose_backend(lens, 10**6, backend="compiled") == "compiled"
@@ -249,12 +249,12 @@ def test_aot_bundle_equals_eager_to_1e12_mm_on_the_cmount_lens() -> None:
     _assert_bundles_agree(eager, fast, ok)
 
 
-def test_auto_sends_a_call_to_a_package_by_its_size_alone(tmp_path, monkeypatch) -> None:
+def test_auto_sends_a_call_to_a_package_by_its_size_alone(cooke, tmp_path, monkeypatch) -> None:
     """``AOT_MIN_RAYS``: loading a package costs milliseconds, so a small call does not use one, whether or
     not an earlier call of the process loaded it (the choice depends on the call alone). (Stand-in package
     files and loader: only the choice is tested here.)"""
     monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
-    lens = build(load_spec(COOKE)).lens
+    lens = cooke.lens
     path = aot.package_path(lens)
     path.parent.mkdir(parents=True)
     path.write_bytes(b"stand-in")
@@ -266,13 +266,13 @@ def test_auto_sends_a_call_to_a_package_by_its_size_alone(tmp_path, monkeypatch)
     assert choose_backend(lens, dispatch.AOT_MIN_RAYS, record=True) == "eager"  # another structure, no package
 
 
-def test_a_damaged_package_falls_back_to_eager_once(tmp_path, monkeypatch, caplog) -> None:
+def test_a_damaged_package_falls_back_to_eager_once(cooke, tmp_path, monkeypatch, caplog) -> None:
     """A package file that does not load (truncated, foreign): the call is traced eagerly (same numbers),
     a warning names the file, and the structure is not offered to the package again in this process."""
     monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(aot, "_loaded", {})
     monkeypatch.setattr(aot, "_broken", set())
-    model = build(load_spec(COOKE))
+    model = cooke
     lens = model.lens
     path = aot.package_path(lens)
     path.parent.mkdir(parents=True)

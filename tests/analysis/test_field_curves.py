@@ -36,7 +36,8 @@ pytestmark = [pytest.mark.filterwarnings("ignore::DeprecationWarning"),
 def test_field_curvature_matches_optiland(name: str) -> None:
     pytest.importorskip("optiland")
     from optiland.analysis import FieldCurvature
-    from optiland_peer import optic_from_model, peer_model
+
+    from tests.analysis.optiland_peer import optic_from_model, peer_model
 
     model = peer_model(name)
     points = 9
@@ -81,8 +82,8 @@ def test_third_order_limit(name: str) -> None:
     assert errors[2][3] < 0.05
 
 
-def test_distortion_is_zero_on_axis_and_real() -> None:
-    model = build(load_spec("specs/cooke_triplet.toml"))
+def test_distortion_is_zero_on_axis_and_real(cooke) -> None:
+    model = cooke
     fc = field_curves(model.lens, model.system, torch.tensor([0.0, 0.5, 1.0], dtype=torch.float64))
     assert float(fc.distortion[0]) == 0.0
     ref = model.system.reference

@@ -24,10 +24,9 @@ from typer.testing import CliRunner
 
 from lensopt.cli.app import app
 from lensopt.spec import load_spec
+from tests.helpers import COOKE, COOKE_OPT
 
 ROOT = Path(__file__).resolve().parents[2]
-COOKE = ROOT / "specs" / "cooke_triplet.toml"
-COOKE_OPT = ROOT / "specs" / "cooke_triplet_opt.toml"
 runner = CliRunner()
 ENV = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
 
@@ -422,11 +421,11 @@ def test_timeout_term_leaves_a_valid_cmount_lens(tmp_path: Path) -> None:
     _check_lens_dir(tmp_path, "x.json")
 
 
-def test_telephoto_layout_carries_its_front_aperture(tmp_path: Path) -> None:
+def test_telephoto_layout_carries_its_front_aperture(cooke, tmp_path: Path) -> None:
     from lensopt.analysis.layout import layout
     from lensopt.spec import build
 
     spec = load_spec(ROOT / "specs" / "telephoto_plastic.toml")
     fa = spec.system.front_aperture
     assert layout(build(spec), rays_per_field=3).front_aperture == (fa.distance, fa.diameter / 2)
-    assert layout(build(load_spec(COOKE)), rays_per_field=3).front_aperture is None
+    assert layout(cooke, rays_per_field=3).front_aperture is None

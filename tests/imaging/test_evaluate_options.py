@@ -10,9 +10,9 @@ import torch
 from typer.testing import CliRunner
 
 from lensopt.cli.app import app
+from tests.helpers import CMOUNT
 
 ROOT = Path(__file__).resolve().parents[2]
-CMOUNT = ROOT / "lenses" / "cmount_4p.json"
 SMALL = ["--count", "2", "--patch", "64", "--rays", "rings:4", "--json"]
 runner = CliRunner()
 

@@ -21,8 +21,7 @@ from lensopt.optim import Problem
 from lensopt.optim.gtra import gtra_residual
 from lensopt.restore import ConditionedRestorer, RestoreConfig
 from lensopt.spec import parse_spec
-
-from .joint_spec import joint_data
+from tests.restore.joint_spec import joint_data
 
 TINY = RestoreConfig(width=4, encoder_blocks=(1, 1), middle_blocks=1, decoder_blocks=(1, 1))
 

@@ -87,10 +87,10 @@ def test_cmount_stop_decenter_closed_form() -> None:
     assert float(gx[0, 0]) == pytest.approx(1 / radius, rel=1e-12) and abs(float(gx[0, 1])) < 1e-12
 
 
-def test_cmount_stop_decenter_in_tolerance_trials() -> None:
+def test_cmount_stop_decenter_in_tolerance_trials(cmount) -> None:
     """With aim = none a stop decenter does nothing (the nominal pupil is traced through a flat air
     surface); with aim = chief the beam follows the stop, and the trial's ESR changes."""
-    model = build(load_spec(ROOT / "lenses" / "cmount_4p.json"))
+    model = cmount
     items = [{"kind": "decenter_x", "limit": 0.05, "surfaces": [0]}, {"kind": "decenter_y", "limit": 0.05,
                                                                        "surfaces": [0]}]
     values = torch.tensor([[0.0, 0.0], [0.03, 0.05]], dtype=torch.float64)
@@ -104,8 +104,8 @@ def test_cmount_stop_decenter_in_tolerance_trials() -> None:
     assert float(chief[1] - chief[0]) > 0.05  # µm: the decentered beam is worse
 
 
-def test_cooke_tilted_element_aim_matches_brute_force() -> None:
-    model = build(load_spec(ROOT / "specs" / "cooke_triplet.toml"))
+def test_cooke_tilted_element_aim_matches_brute_force(cooke) -> None:
+    model = cooke
     system = model.system
     lens = _placed(model.lens, groups=((0, 1),), group_decenter=torch.tensor([[0.05, 0.0]], dtype=torch.float64),
                    group_tilt=torch.tensor([[20 * ARCMIN, 0.0]], dtype=torch.float64))

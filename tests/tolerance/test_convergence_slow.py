@@ -9,7 +9,6 @@ trials); ``make test-slow``. The full study at rings:12 is ``benchmarks/toleranc
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import pytest
 
@@ -18,8 +17,7 @@ from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
 from lensopt.tolerance.job import HIGHER_IS_BETTER
 from lensopt.tolerance.monte_carlo import monte_carlo, yield_table
-
-CMOUNT = Path(__file__).resolve().parents[2] / "lenses" / "cmount_4p.json"
+from tests.helpers import CMOUNT
 
 
 @pytest.mark.slow

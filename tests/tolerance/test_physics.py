@@ -72,7 +72,7 @@ def test_thickness_moves_paraxial_focus_by_the_formula(gap: int) -> None:
     assert comp[2] == pytest.approx(0.05 * per_mm, rel=0.03)
 
 
-def test_surface_decenter_moves_centroid_as_optiland_says() -> None:
+def test_surface_decenter_moves_centroid_as_optiland_says(cooke) -> None:
     pytest.importorskip("optiland")
     from optiland import optic as ol_optic
     from optiland.materials import IdealMaterial
@@ -80,7 +80,7 @@ def test_surface_decenter_moves_centroid_as_optiland_says() -> None:
 
     from lensopt.optics.bundle import trace_bundle
 
-    model = build(load_spec(ROOT / "specs" / "cooke_triplet.toml"))
+    model = cooke
     lens, system = model.lens, model.system
     settings = _settings(items=[{"kind": "decenter_y", "limit": 0.1, "surfaces": [2]},
                                 {"kind": "decenter_x", "limit": 0.1, "surfaces": [2]}], compensator="none",

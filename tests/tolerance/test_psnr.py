@@ -9,7 +9,6 @@
 from __future__ import annotations
 
 import json
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -20,12 +19,11 @@ from typer.testing import CliRunner
 from lensopt.cli.app import app
 from lensopt.design.tolerance import tolerance_job
 from lensopt.errors import LensoptError
-from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
 from lensopt.tolerance.job import run_trials
 from lensopt.tolerance.monte_carlo import monte_carlo, yield_table
+from tests.helpers import cooke_data
 
-ROOT = Path(__file__).resolve().parents[2]
 runner = CliRunner()
 TINY_RESTORE = {"width": 4, "encoder_blocks": [1, 1], "middle_blocks": 1, "decoder_blocks": [1, 1],
                 "train": {"batch": 2, "patch": 32, "steps": 1, "checkpoint_every": 1, "validate_every": 1,
@@ -36,7 +34,7 @@ IMAGING = {"psnr_count": 2, "psnr_patch": 32, "psnr_sampling": "rings:4", "seed"
 @pytest.fixture
 def tiny_lens(tmp_path: Path) -> Path:
     """The Cooke triplet on a 640 × 480 sensor with a tiny restoration network section."""
-    data = tomllib.loads((ROOT / "specs" / "cooke_triplet.toml").read_text())
+    data = cooke_data()
     data["sensor"]["resolution"] = [640, 480]
     data["restore"] = TINY_RESTORE
     path = tmp_path / "tiny.json"
@@ -80,8 +78,8 @@ def _with(settings: ToleranceSpec, **kw) -> ToleranceSpec:
     return ToleranceSpec.model_validate({**settings.model_dump(), **kw})
 
 
-def test_defocus_lowers_psnr_and_errors() -> None:
-    model = build(load_spec(ROOT / "specs" / "cooke_triplet.toml"))
+def test_defocus_lowers_psnr_and_errors(cooke) -> None:
+    model = cooke
     last = len(model.spec.surfaces) - 1
     settings = ToleranceSpec.model_validate({"items": [{"kind": "thickness", "limit": 0.2, "surfaces": [last]}],
                                              "compensator": "none", "metric": "psnr", **IMAGING})

@@ -18,9 +18,7 @@ from lensopt.tolerance.job import nominal_metrics, run_trials
 from lensopt.tolerance.model import Tolerance, draw, nominal_params
 from lensopt.tolerance.monte_carlo import monte_carlo, yield_table
 from lensopt.tolerance.sensitivity import moments, sensitivity
-
-ROOT = Path(__file__).resolve().parents[2]
-CMOUNT = ROOT / "lenses" / "cmount_4p.json"
+from tests.helpers import CMOUNT
 
 
 def _model(path: Path = CMOUNT):
