@@ -27,7 +27,7 @@ from lensopt.analysis.wavefront import opd_fans
 from lensopt.errors import LensoptError
 from lensopt.optics.paraxial import first_order
 from lensopt.spec import build, load_spec, parse_spec
-from tests.helpers import oval_model
+from tests.helpers import COOKE, oval_model
 
 pytestmark = [pytest.mark.filterwarnings("ignore::DeprecationWarning"),
               pytest.mark.filterwarnings("ignore:.*:numba.core.errors.NumbaIRAssumptionWarning")]
@@ -118,7 +118,7 @@ def test_strehl_of_a_perfect_lens_and_marechal() -> None:
 
 
 def test_strehl_of_a_real_lens_both_estimates() -> None:
-    spec = load_spec("specs/cooke_triplet.toml").model_dump(mode="json", exclude_none=True)
+    spec = load_spec(COOKE).model_dump(mode="json", exclude_none=True)
     spec["system"]["aperture"] = {"epd": 4.0}  # stopped down to f/12.5: near the diffraction limit
     model = build(parse_spec(spec))
     s = strehl(model.lens, model.system, rel_field=torch.tensor([0.0, 0.5], dtype=torch.float64), pupil_samples=48)

@@ -27,6 +27,7 @@ from lensopt.analysis.mtf_field import defocused
 from lensopt.analysis.seidel import seidel_sums
 from lensopt.optics.paraxial import first_order
 from lensopt.spec import build, load_spec, parse_spec
+from tests.helpers import SPECS
 
 pytestmark = [pytest.mark.filterwarnings("ignore::DeprecationWarning"),
               pytest.mark.filterwarnings("ignore:.*:numba.core.errors.NumbaIRAssumptionWarning")]
@@ -51,9 +52,9 @@ def test_field_curvature_matches_optiland(name: str) -> None:
         assert np.abs(mine.sagittal_mm[:, w].numpy() - sag).max() <= 1e-6 * scale
 
 
-@pytest.mark.parametrize("name", ["specs/cooke_triplet.toml", "specs/double_gauss.toml"])
+@pytest.mark.parametrize("name", ["cooke_triplet.toml", "double_gauss.toml"])
 def test_third_order_limit(name: str) -> None:
-    model = build(load_spec(name))
+    model = build(load_spec(SPECS / name))
     system = model.system
     fo = first_order(model.lens, system)
     lens = defocused(model.lens, fo.bfl - model.lens.thickness[-1])  # the image at the paraxial focus

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import copy
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -31,7 +32,7 @@ from lensopt.analysis.seidel import seidel_sums
 from lensopt.errors import LensoptError
 from lensopt.optics.paraxial import first_order
 from lensopt.spec import build, load_spec, parse_spec
-from tests.helpers import oval_spec
+from tests.helpers import COOKE, SPECS, oval_spec
 
 pytestmark = [pytest.mark.filterwarnings("ignore::DeprecationWarning"),
               pytest.mark.filterwarnings("ignore:.*:numba.core.errors.NumbaIRAssumptionWarning")]
@@ -73,7 +74,7 @@ def test_petzval_sum_from_curvatures_and_indices(cooke) -> None:
     assert float(s.invariant) == pytest.approx(h, rel=1e-12)
 
 
-def _with_stop(path: str, stop: int):
+def _with_stop(path: Path, stop: int):
     spec = load_spec(path).model_dump(mode="json", exclude_none=True)
     for i, surf in enumerate(spec["surfaces"]):
         surf["stop"] = i == stop
@@ -83,7 +84,7 @@ def _with_stop(path: str, stop: int):
 @pytest.mark.parametrize("stop", [0, 1, 4, 5])
 def test_stop_shift_equations(cooke, stop: int) -> None:
     base = cooke
-    moved = _with_stop("specs/cooke_triplet.toml", stop)
+    moved = _with_stop(COOKE, stop)
     from lensopt.optics.paraxial import field_tangents, trace_paraxial
 
     def chief(model):
@@ -162,6 +163,6 @@ def test_waves_and_units(cooke) -> None:
 
 
 def test_diffractive_lens_is_refused() -> None:
-    model = build(load_spec("specs/hybrid_achromat.toml"))
+    model = build(load_spec(SPECS / "hybrid_achromat.toml"))
     with pytest.raises(LensoptError, match="^seidel: Seidel sums of diffractive"):
         seidel_sums(model.lens, model.system)
