@@ -1,10 +1,11 @@
-"""Independent tasks serially or on Dask, and the set-up of a torch.distributed (torchrun) run.
+"""Independent tasks serially or on Dask, and the state and set-up of a torch.distributed (torchrun) run.
 
 A leaf utility (it imports nothing else from lensopt but the errors). ``run_tasks`` is shared by the
 tolerance Monte Carlo and the design sweeps: every task is ``fn(shared, item)``; ``shared`` is sent to
 each worker once, the items one by one. Results come back in the order of ``items`` whatever order the
 workers finish in, so a serial run and a distributed run give the same list; ``on_done`` sees each
-result as it arrives (to write it to disk or show progress). ``init_distributed`` and
+result as it arrives (to write it to disk or show progress). ``Dist`` is a process's place in a
+data-parallel run (rank, world size, collectives); ``init_distributed``, ``distributed`` and
 ``check_same_settings`` set up the data-parallel training runs (``train-irm``, the joint optimization).
 
 **Which scheduler (``auto``, the default of ``tolerance`` and ``sweep``).** A Dask LocalCluster costs its
@@ -26,11 +27,15 @@ import logging
 import os
 import time
 from collections.abc import Callable, Iterator, Sequence
-from typing import Any, TypeVar
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from lensopt.errors import LensoptError
 
-__all__ = ["AUTO_SERIAL_BELOW_S", "auto_plan", "dask_client", "run_tasks", "init_distributed",
+if TYPE_CHECKING:
+    from torch import Tensor
+
+__all__ = ["AUTO_SERIAL_BELOW_S", "auto_plan", "dask_client", "run_tasks", "Dist", "init_distributed", "distributed",
            "check_same_settings"]
 
 AUTO_SERIAL_BELOW_S = 30.0
@@ -153,13 +158,65 @@ def run_tasks(fn: Callable[[S, T], R], items: Sequence[T], *, shared: S, schedul
     return results
 
 
-def init_distributed(device: Any) -> tuple[int, int, str]:
-    """This process's ``(rank, world size, collective device)``: torchrun sets RANK/WORLD_SIZE (the process
-    group is gloo on the CPU, NCCL on CUDA); else ``(0, 1, "cpu")``, one process. ``device``: the
-    run's ``torch.device``. (``optim.joint.Dist(*init_distributed(device))`` is the run's ``Dist``.)"""
+@dataclass(frozen=True)
+class Dist:
+    """This process's place in a data-parallel run (rank 0 of 1 without torch.distributed)."""
+
+    rank: int = 0
+    world: int = 1
+    device: str = "cpu"  # where collectives run: cpu for gloo, the rank's GPU for NCCL
+
+    @property
+    def active(self) -> bool:
+        return self.world > 1
+
+    def share(self, n: int) -> slice:
+        """This rank's slice of a batch of ``n`` (equal shares; ``n`` must divide)."""
+        k = n // self.world
+        return slice(self.rank * k, (self.rank + 1) * k)
+
+    def mean(self, t: Tensor) -> Tensor:
+        """All-reduced mean over ranks (identity for one process)."""
+        if not self.active:
+            return t
+        import torch.distributed as dist
+
+        src = t.device
+        t = t.detach().clone().to(self.device)
+        dist.all_reduce(t)
+        return (t / self.world).to(src)
+
+    def any(self, flag: bool) -> bool:
+        """True on every rank if ``flag`` is true on any (a stop request must be seen by all ranks at the
+        same step boundary, or the others would wait in the next collective)."""
+        if not self.active:
+            return flag
+        import torch
+        import torch.distributed as dist
+
+        t = torch.tensor([int(flag)], device=self.device)
+        dist.all_reduce(t, op=dist.ReduceOp.MAX)
+        return bool(t.item())
+
+    def broadcast(self, t: Tensor) -> Tensor:
+        """Rank 0's ``t`` on every rank (identity for one process)."""
+        if not self.active:
+            return t
+        import torch.distributed as dist
+
+        src = t.device
+        t = t.detach().clone().contiguous().to(self.device)
+        dist.broadcast(t, 0)
+        return t.to(src)
+
+
+def init_distributed(device: Any) -> Dist:
+    """This process's ``Dist``: torchrun sets RANK/WORLD_SIZE (the process group is gloo on the CPU, NCCL on
+    CUDA, where each rank's collectives run on its GPU); else rank 0 of 1. ``device``: the run's
+    ``torch.device``."""
     world = int(os.environ.get("WORLD_SIZE", "1"))
     if world <= 1:
-        return 0, 1, "cpu"
+        return Dist()
     import torch
     import torch.distributed as dist
 
@@ -167,7 +224,26 @@ def init_distributed(device: Any) -> tuple[int, int, str]:
         dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
     rank = dist.get_rank()
     where = f"cuda:{rank % torch.cuda.device_count()}" if device.type == "cuda" else "cpu"
-    return rank, dist.get_world_size(), where
+    return Dist(rank, dist.get_world_size(), where)
+
+
+@contextlib.contextmanager
+def distributed(device: Any) -> Iterator[tuple[Dist, Any]]:
+    """``(Dist, device)`` of a data-parallel run: under torchrun on CUDA each rank works on its own GPU
+    (``cuda:rank % count``, made current); the process group is destroyed when the block ends."""
+    dist = init_distributed(device)
+    if device.type == "cuda" and dist.active:
+        import torch
+
+        device = torch.device(dist.device)
+        torch.cuda.set_device(device)
+    try:
+        yield dist, device
+    finally:
+        if dist.active:
+            import torch.distributed as tdist
+
+            tdist.destroy_process_group()
 
 
 def check_same_settings(world: int, settings: dict[str, Any]) -> None:

@@ -10,7 +10,7 @@ import torch
 
 from lensopt.devices import resolve_device
 from lensopt.errors import LensoptError
-from lensopt.parallel import check_same_settings, init_distributed
+from lensopt.parallel import Dist, check_same_settings, init_distributed
 
 
 @pytest.mark.parametrize("name", [None, "cpu", "CPU", " cpu ", "cpu:0"])
@@ -45,5 +45,5 @@ def test_mps_without_mps() -> None:
 
 def test_one_process_outside_torchrun(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv("WORLD_SIZE", raising=False)
-    assert init_distributed(torch.device("cpu")) == (0, 1, "cpu")
+    assert init_distributed(torch.device("cpu")) == Dist(rank=0, world=1, device="cpu")
     check_same_settings(1, {"anything": object()})  # one process: nothing to compare, no collective

@@ -4,17 +4,18 @@ the ranks, and there is no import cycle anywhere.
     9.5  lensopt/__main__.py, the command's entry
     9    cli (lensopt/cli/)
     8.5  qa, study
-    8.2  design
+    8.2  design (every spec → engine adapter; the joint lens + network step composes optim and restore)
     8.1  interchange (CODE V, Zemax: the spec is their data model)
     8    spec
     7    tolerance
     6    optim
-    5    restore
+    5    restore (networks, their training and applying: imaging below it, no lens optimization)
     4    imaging, plot (beside each other: neither imports the other)
     3    analysis
+    2.5  accel (the compiled traces and Jacobian; reached from below through the ``Engine``'s tracer)
     2    optics
     1    materials
-    0.5  leaves: resources, parallel, devices, checkpoint (they import only rank 0)
+    0.5  leaves: engine, parallel, devices, checkpoint (they import only rank 0)
     0    errors, files (atomic writes), the package root (``lensopt/__init__.py``): they import nothing from lensopt
 
 Two packages on the same rank must not import each other. typer, rich and pydantic appear only in the
@@ -30,8 +31,8 @@ from pathlib import Path
 PKG = Path(__file__).resolve().parents[1] / "lensopt"
 
 RANK = {"lensopt": 0, "errors": 0, "files": 0,
-        "resources": 0.5, "parallel": 0.5, "devices": 0.5, "checkpoint": 0.5,
-        "materials": 1, "optics": 2, "analysis": 3, "imaging": 4, "plot": 4, "restore": 5, "optim": 6,
+        "engine": 0.5, "parallel": 0.5, "devices": 0.5, "checkpoint": 0.5,
+        "materials": 1, "optics": 2, "accel": 2.5, "analysis": 3, "imaging": 4, "plot": 4, "restore": 5, "optim": 6,
         "tolerance": 7, "spec": 8, "interchange": 8.1, "design": 8.2, "qa": 8.5, "study": 8.5,
         "cli": 9, "__main__": 9.5}
 UI_PACKAGES = ("typer", "rich", "pydantic")

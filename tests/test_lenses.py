@@ -120,7 +120,7 @@ def _cmount_requirements(model, rep: dict) -> None:  # noqa: ANN001
     assert len(glasses) == 4 and all(isinstance(g, str) and g.split(":")[-1] in ohara for g in glasses)
 
 
-def test_the_raw_cmount_lens_images_better_than_the_spot_lens() -> None:
+def test_the_raw_cmount_lens_images_better_than_the_spot_lens(cmount) -> None:
     # Seed Table S15: the raw-image-quality lens gains 0.7 dB of pre-restoration PSNR (26.2 → 26.9 dB on
     # DIV2K) while its ESR grows (12.9 → 15.5 µm). Here: held-out dead-leaves patches rendered as in the
     # run (benchmarks/e2e/run_cmount_raw.py, numbers in benchmarks/README.md), same patches for both lenses.
@@ -128,7 +128,7 @@ def test_the_raw_cmount_lens_images_better_than_the_spot_lens() -> None:
 
     raw_path = ROOT / "lenses" / "cmount_4p_raw.json"
     raw = build_problem(load_spec(raw_path))
-    spot = build(load_spec(ROOT / "lenses" / "cmount_4p.json"))
+    spot = cmount
     before = raw.image.held_out_psnr(spot.lens, count=8)
     after = raw.image.held_out_psnr(raw.setup.lens, count=8)
     # 13.736 → 14.189 dB on these 8 patches when written (32 patches in the run: 13.854 → 14.337 dB).

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lensopt.optics.backend import use_backend
+from lensopt import accel
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import PupilSampling
 from lensopt.plot.accuracy import accuracy_figure
@@ -95,9 +95,10 @@ def esr_error(model, setting: str) -> tuple[float, float]:  # type: ignore[no-un
     ps = PupilSampling.parse(words[0])
     lens = _cast(model.lens, torch.float32) if "float32" in words else model.lens
     ref = spot_reference(model)
-    with torch.no_grad(), use_backend("compiled" if "compiled" in words else "eager"):
+    engine = accel.engine("compiled" if "compiled" in words else "eager")
+    with torch.no_grad():
         pts = ps.points(dtype=lens.dtype)
-        b = trace_bundle(lens, model.system, pts, half_pupil=ps.half)
+        b = trace_bundle(lens, model.system, pts, half_pupil=ps.half, engine=engine)
         fw = torch.tensor(model.system.field_weights, dtype=lens.dtype) if model.system.field_weights else None
         esr, _ = weighted_spot(b, torch.ones(pts.shape[0], dtype=lens.dtype),
                                model.system.wavelength_weights.to(lens.dtype), fw)
@@ -170,7 +171,6 @@ def part_commands(repeats: int, lenses: list[str], only: list[str] | None, backe
 def part_illumination(grid: int) -> None:
     """The flux-counting illumination reference (millions of rays in 2 M-ray tiles) per backend, in process."""
     from lensopt.analysis.irradiance import relative_illumination_flux
-    from lensopt.optics import backend
 
     model = build(load_spec(ROOT / "specs" / "wide_angle_laikin.toml"))
     print(f"\n### relative_illumination_flux, specs/wide_angle_laikin.toml, grid {grid}, spec fields\n")
@@ -178,10 +178,9 @@ def part_illumination(grid: int) -> None:
     print("| --- | --- | --- |")
     base = None
     for name in ("eager", "auto", "compiled", "auto"):
-        backend.reset_auto_counts()
         t0 = time.perf_counter()
-        with use_backend(name):
-            r = relative_illumination_flux(model.lens, model.system, model.system.rel_field, grid=grid)
+        r = relative_illumination_flux(model.lens, model.system, model.system.rel_field, grid=grid,
+                                       engine=accel.engine(name))
         dt = time.perf_counter() - t0
         ri = r.relative_illumination if hasattr(r, "relative_illumination") else r
         vals = [float(v) for v in torch.as_tensor(ri).flatten()]

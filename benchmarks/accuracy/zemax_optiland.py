@@ -2,8 +2,8 @@
 that lensopt imports: first-order data (EFL, entrance pupil position, back focus, exit pupil, EPD) against
 optiland 0.6.3's reader (relative deviation) and lensopt's launched rays traced through optiland's surfaces
 (image intercepts, mm), with optiland's media replaced by lensopt's indices at the reference wavelength;
-then the same for the coordinate-break file of tests/io/test_zemax_coordbrk.py, and the round trip
-lensopt → .zmx → lensopt for every lens of specs/ and tests/io/data/.
+then the same for the coordinate-break file of tests/interchange/test_zemax_coordbrk.py, and the round trip
+lensopt → .zmx → lensopt for every lens of specs/ and tests/interchange/data/.
 
     PYTHONPATH=. python benchmarks/accuracy/zemax_optiland.py
 """
@@ -27,8 +27,8 @@ from lensopt.optics.bundle import trace_bundle  # noqa: E402
 from lensopt.optics.paraxial import first_order  # noqa: E402
 from lensopt.optics.sampling import PupilSampling  # noqa: E402
 from lensopt.spec import build, load_spec  # noqa: E402
-from tests.io import test_zemax_coordbrk as cb  # noqa: E402
-from tests.io import test_zemax_real_files as rf  # noqa: E402
+from tests.interchange import test_zemax_coordbrk as cb  # noqa: E402
+from tests.interchange import test_zemax_real_files as rf  # noqa: E402
 
 
 def rays_dev(lens, model, optic) -> tuple[float, int, int]:
@@ -127,13 +127,13 @@ def main() -> None:
     tmp.mkdir(exist_ok=True)
     try:
         cb.test_coordinate_breaks_trace_like_optiland(tmp)
-        print("coordinate-break file: within 1e-9 mm of optiland (tests/io/test_zemax_coordbrk.py)")
+        print("coordinate-break file: within 1e-9 mm of optiland (tests/interchange/test_zemax_coordbrk.py)")
     finally:
         for f in tmp.iterdir():
             f.unlink()
         tmp.rmdir()
     worst = 0.0
-    lenses = sorted((ROOT / "specs").glob("*.toml")) + sorted((ROOT / "tests" / "io" / "data").glob("*.toml"))
+    lenses = sorted((ROOT / "specs").glob("*.toml")) + sorted((ROOT / "tests" / "interchange" / "data").glob("*.toml"))
     pts = PupilSampling.parse("rings:6:nojitter").points(dtype=torch.float64)
     done = 0
     for path in lenses:

@@ -26,11 +26,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: pro
 from procmem import peak_rss_mb, vm_kb  # noqa: E402
 
 from lensopt.design import build_problem  # noqa: E402
-from lensopt.optim.irm import make_optimizer, network_step  # noqa: E402
-from lensopt.optim.joint import RestoredObjective, joint_step  # noqa: E402
+from lensopt.design.joint import RestoredObjective, joint_step  # noqa: E402
 from lensopt.optim.lm import LevenbergMarquardt, Trial, damped_step  # noqa: E402
 from lensopt.restore import ConditionedRestorer, RestoreConfig  # noqa: E402
 from lensopt.restore.config import TrainConfig  # noqa: E402
+from lensopt.restore.train import network_optimizer, network_step  # noqa: E402
 from lensopt.spec import parse_spec  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -76,7 +76,7 @@ def main() -> None:
     obj = RestoredObjective(problem.setup.camera, problem.opt.image, net)
     problem.image = obj
     cfg = TrainConfig()
-    adam = make_optimizer(net, cfg)
+    adam = network_optimizer(net, cfg)
 
     def evaluate(t: torch.Tensor) -> Trial:
         ev = problem.evaluate(t)

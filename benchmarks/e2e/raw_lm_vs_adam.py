@@ -33,8 +33,8 @@ import torch
 
 from lensopt.design import build_problem
 from lensopt.optics.sampling import PupilSampling
+from lensopt.optim.driver import _next_batch, make_optimizer
 from lensopt.optim.report import constraint_report
-from lensopt.optim.run import _next_batch, make_optimizer
 from lensopt.spec import load_spec
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -7,7 +7,7 @@ problems of specs/cooke_triplet_opt.toml and specs/cmount_4p.toml (start points)
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/optimize/jacobian_cost.py --compiled --no-fd --jacrev-max-rows 0 \
         --json benchmarks/optimize/results_jacobian_compiled.json
 
-``--compiled`` adds the compiled forward-mode Jacobian (``optim.compiled_jacobian``: make_fx of jacfwd,
+``--compiled`` adds the compiled forward-mode Jacobian (``accel.jacobian``: make_fx of jacfwd,
 compiled by Inductor; ``--compiled-backend`` picks how) with its one-off capture + compile time (wall
 and this process's CPU time);
 every row also gives its cost in units of one eager residual evaluation measured in the same run.
@@ -92,7 +92,7 @@ def bench(spec_name: str, repeats: int, jacrev_max_rows: int, compiled: bool = F
     if compiled:
         from torch.fx.experimental.proxy_tensor import make_fx  # noqa: F401 - imported before the clock
 
-        from lensopt.optim.compiled_jacobian import CompiledJacobian
+        from lensopt.accel.jacobian import CompiledJacobian
 
         cj = CompiledJacobian(p, check=False, backend=backend)
         t0, c0 = time.perf_counter(), _cpu_with_children()
@@ -139,7 +139,7 @@ def main() -> None:
     args = ap.parse_args()
     if args.clock == "cpu":
         CLOCK["now"] = time.process_time
-    from lensopt.optim.run import retain_freed_memory
+    from lensopt.engine import retain_freed_memory
 
     retain_freed_memory()  # as `lensopt optimize` runs
     results = {

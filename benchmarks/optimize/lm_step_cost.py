@@ -44,7 +44,7 @@ def measure(spec: str, repeats: int, steps: int) -> dict:
 
     import lensopt
     from lensopt.design import build_problem
-    from lensopt.optim.run import make_optimizer
+    from lensopt.optim.driver import make_optimizer
     from lensopt.spec import load_spec
 
     torch.set_num_threads(1)

@@ -10,7 +10,7 @@ learning rates (the best is reported); LM with the Table S7 defaults.
         --json benchmarks/optimize/results_lm_vs_adam.json \\
         --plot benchmarks/optimize/lm_vs_adam.png
 
-``--jacobian compiled`` gives LM the compiled forward-mode Jacobian (``optim.compiled_jacobian``, its AOT
+``--jacobian compiled`` gives LM the compiled forward-mode Jacobian (``accel.jacobian``, its AOT
 package): its first call — loading the problem's package, or capturing and compiling it when this machine
 has none yet — runs *inside* LM's clock and is reported beside the curves (where the package came from and
 the seconds of that first call); ``--jacobian eager compiled``: one LM run with each. Run it twice: the
@@ -44,22 +44,27 @@ from pathlib import Path
 
 import torch
 
+from lensopt import accel
 from lensopt.design import build_problem
-from lensopt.optics.backend import set_backend
+from lensopt.engine import retain_freed_memory
 from lensopt.optim import Problem
-from lensopt.optim.run import make_optimizer, retain_freed_memory
+from lensopt.optim.driver import make_optimizer
 from lensopt.spec import load_spec
 
 SPECS = Path(__file__).resolve().parents[2] / "specs"
 
 
+BACKEND = ["eager"]  # this script's --backend (set in main / _worker before the problems are built)
+
+
 def problem(name: str) -> Problem:
+    engine = accel.engine(BACKEND[0])
     if name == "cooke":
-        return build_problem(load_spec(SPECS / "cooke_triplet_opt.toml"))
+        return build_problem(load_spec(SPECS / "cooke_triplet_opt.toml"), engine=engine)
     spec = load_spec(SPECS / "cmount_4p.toml")
     for s in spec.surfaces:
         s.vary = [v for v in s.vary if v != "material"]
-    return build_problem(spec)
+    return build_problem(spec, engine=engine)
 
 
 def _cpu_s() -> float:
@@ -104,7 +109,7 @@ def _worker(name: str, method: str, budget_s: float, lr: float | None, jacobian:
             backend: str) -> tuple[str, list[tuple[float, float]], dict, tuple[float, float, float]]:
     """One optimizer run in a fresh process (``--parallel``)."""
     torch.set_num_threads(1)
-    set_backend(backend)
+    BACKEND[0] = backend
     retain_freed_memory()
     trace, info = run(problem(name), method, budget_s, lr, jacobian, clock)
     return method, trace, info, os.getloadavg()
@@ -150,10 +155,10 @@ def main() -> None:
     load_before = os.getloadavg()
     torch.set_num_threads(1)
     retain_freed_memory()
+    BACKEND[0] = args.backend
     p = problem(args.problem)
-    set_backend(args.backend)
     if args.prebuild and "compiled" in args.jacobian:
-        from lensopt.optim.compiled_jacobian import CompiledJacobian
+        from lensopt.accel.jacobian import CompiledJacobian
 
         c0, jac = _cpu_s(), CompiledJacobian(problem(args.problem))
         jac(p.theta0)

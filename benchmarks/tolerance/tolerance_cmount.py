@@ -20,25 +20,20 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from lensopt.design.tolerance import tolerance_job
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
-from lensopt.spec.tolerance_build import make_job
 from lensopt.tolerance.evaluate import evaluate
+from lensopt.tolerance.job import nominal_metrics, scalar_metric
 from lensopt.tolerance.model import draw
-from lensopt.tolerance.run import (
-    monte_carlo,
-    nominal_metrics,
-    rss_prediction,
-    scalar_metric,
-    sensitivity,
-    yield_table,
-)
+from lensopt.tolerance.monte_carlo import monte_carlo, yield_table
+from lensopt.tolerance.sensitivity import rss_prediction, sensitivity
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _job(model, sampling: str, chunk: int = 25, compiled: bool = False):
-    job = make_job(model, ToleranceSpec(profile="s6.2", sampling=sampling, chunk=chunk, seed=0))
+    job = tolerance_job(model, ToleranceSpec(profile="s6.2", sampling=sampling, chunk=chunk, seed=0))
     if compiled:
         import dataclasses
 

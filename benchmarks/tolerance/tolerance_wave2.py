@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from lensopt.design.tolerance import tolerance_job
 from lensopt.optics.aiming import aim_chief, stop_hit
 from lensopt.optics.paraxial import field_tangents, first_order
 from lensopt.optics.placement import Placement
@@ -39,15 +40,15 @@ from lensopt.optics.sampling import launch
 from lensopt.optics.trace import trace
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
-from lensopt.spec.tolerance_build import make_job
-from lensopt.tolerance.run import monte_carlo, nominal_metrics, scalar_metric
+from lensopt.tolerance.job import nominal_metrics, scalar_metric
+from lensopt.tolerance.monte_carlo import monte_carlo
 
 ROOT = Path(__file__).resolve().parents[2]
 ARCMIN = math.pi / (180 * 60)
 
 
 def _mc(model, settings: dict, trials: int) -> dict:
-    job = make_job(model, ToleranceSpec.model_validate(settings))
+    job = tolerance_job(model, ToleranceSpec.model_validate(settings))
     nominal = float(scalar_metric(nominal_metrics(job), job.metric)[0])
     t0 = time.perf_counter()
     mc = monte_carlo(job, trials, 0)
@@ -136,8 +137,8 @@ def psnr_study(model, trials: int) -> dict:
 def timing_study(model, trials: int, repeats: int = 3) -> dict:
     """Seconds per trial (serial, batched in chunks of 25), the configurations interleaved and repeated,
     the fastest repeat kept (the machine is shared: load varies between runs)."""
+    from lensopt.tolerance.job import run_trials
     from lensopt.tolerance.model import draw
-    from lensopt.tolerance.run import run_trials
 
     dec = [{"kind": "element_decenter_x", "limit": 0.02}, {"kind": "element_decenter_y", "limit": 0.02},
            {"kind": "element_tilt_x", "limit": 1.0}, {"kind": "element_tilt_y", "limit": 1.0},
@@ -145,7 +146,7 @@ def timing_study(model, trials: int, repeats: int = 3) -> dict:
                                                                      "surfaces": [0]}]
     configs = {"fields=y aim=none": {"fields": "y"}, "fields=xy aim=none": {"fields": "xy"},
                "fields=y aim=chief": {"aim": "chief"}, "fields=xy aim=chief": {"fields": "xy", "aim": "chief"}}
-    jobs = {k: make_job(model, ToleranceSpec.model_validate({"profile": "s6.2", "items": dec, **c}))
+    jobs = {k: tolerance_job(model, ToleranceSpec.model_validate({"profile": "s6.2", "items": dec, **c}))
             for k, c in configs.items()}
     values = draw(list(next(iter(jobs.values())).tols), trials, 0)
     best = {k: math.inf for k in jobs}

@@ -1,6 +1,6 @@
 """Issue 13: the trace's share of the ray-heavy commands, per backend (in-process, each command its own process).
 
-Each run is a fresh process that wraps ``optics.backend.trace_with`` with a timer, runs one CLI command
+Each run is a fresh process that wraps ``accel.dispatch.trace_with`` with a timer, runs one CLI command
 (``--backend`` given) and reports the rays traced, the seconds spent in ``trace_with`` (the part the
 backend changes; imports, aiming, PSF binning, convolution and plotting are the same on every backend)
 and which backend each call took. Backends interleaved, medians of ``--repeats``:
@@ -28,7 +28,7 @@ OUT = ROOT / "out" / "command_trace_time"
 
 
 def child(args: list[str]) -> None:
-    from lensopt.optics import backend, bundle
+    from lensopt.accel import dispatch as backend
 
     calls: list[tuple[int, str, float]] = []
     real, choose = backend.trace_with, backend.choose_backend
@@ -48,7 +48,7 @@ def child(args: list[str]) -> None:
         return out
 
     backend.choose_backend = spy_choose
-    backend.trace_with = bundle.trace_with = timed
+    backend.trace_with = timed  # what lensopt.accel.engine puts in the CLI's engines
     from lensopt.cli.app import app
 
     try:

@@ -3,7 +3,7 @@
 The compiled kernels get fixed chunks (``backend.COMPILED_CHUNK`` rays for ``torch.compile``,
 ``aot.AOT_CHUNK`` for an AOT package; the last chunk padded), so a lens structure compiles once per
 machine. ``--kind compiled``: ``torch.compile`` in the process (later processes find Inductor's on-disk
-caches); ``--kind aot`` (default): the structure's AOT package (``optics.aot``), built by the cold process.
+caches); ``--kind aot`` (default): the structure's AOT package (``accel.aot``), built by the cold process.
 Each measurement is a fresh process (``--child``) that:
 
 1. imports lensopt and builds the lens and a ray batch (the ``rings:64`` bundle of every field and
@@ -41,7 +41,11 @@ def child(lens_path: str, repeats: int, kind: str) -> dict:
     t0 = time.perf_counter()
     import torch
 
-    from lensopt.optics import aot, backend, bundle
+    from lensopt import accel
+    from lensopt.accel import aot
+    from lensopt.accel import dispatch as backend
+    from lensopt.engine import Engine
+    from lensopt.optics import bundle
     from lensopt.optics.sampling import PupilSampling
     from lensopt.optics.trace import Rays, trace
     from lensopt.spec import build, load_spec
@@ -50,17 +54,13 @@ def child(lens_path: str, repeats: int, kind: str) -> dict:
     t_import = time.perf_counter() - t0
     model = build(load_spec(lens_path))
     captured: list[Rays] = []
-    real = bundle.trace_with
-
     def capture(lens, rays, **kw):  # type: ignore[no-untyped-def]
         captured.append(rays)
-        return real(lens, rays, **kw)
+        return trace(lens, rays, upto=kw["upto"], record=kw["record"])
 
-    bundle.trace_with = capture
     with torch.no_grad():
         bundle.trace_bundle(model.lens, model.system, PupilSampling.parse("rings:64").points(dtype=torch.float64),
-                            half_pupil=True, backend="eager")
-    bundle.trace_with = real
+                            half_pupil=True, engine=Engine(backend="eager", tracer=capture))
     rays = captured[-1]
     pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
     pos, dir = pos.reshape(-1, 3), dir.reshape(-1, 3)
@@ -79,15 +79,15 @@ def child(lens_path: str, repeats: int, kind: str) -> dict:
         t = time.perf_counter()
         if kind == "aot" and not aot.has_package(lens):
             out["build_s"] = aot.build_package(lens)
-        backend.trace_with(lens, r, backend="compiled")
+        backend.trace_with(lens, r, engine=accel.engine("compiled"))
         out["first_call_s"] = time.perf_counter() - t
         if kind == "aot":
             assert aot.has_package(lens) and backend.choose_backend(lens, chunk, backend="compiled") == "aot"
         t = time.perf_counter()
-        backend.trace_with(lens, r, backend="compiled")
+        backend.trace_with(lens, r, engine=accel.engine("compiled"))
         out["second_call_s"] = time.perf_counter() - t
         check = sub(min(total, 100_000))
-        a, b = trace(lens, check), backend.trace_with(lens, check, backend="compiled")
+        a, b = trace(lens, check), backend.trace_with(lens, check, engine=accel.engine("compiled"))
         ok = a.valid
         out["max_diff_mm"] = float((a.pos - b.pos)[ok].abs().max())
         out["same_status"] = bool(torch.equal(a.status, b.status))
@@ -98,7 +98,7 @@ def child(lens_path: str, repeats: int, kind: str) -> dict:
             for _ in range(repeats):
                 for name in ("eager", "compiled"):
                     t = time.perf_counter()
-                    backend.trace_with(lens, r, backend=name)
+                    backend.trace_with(lens, r, engine=accel.engine(name))
                     times[name].append(time.perf_counter() - t)
             steady[str(n)] = {k: statistics.median(v) for k, v in times.items()}
         out["steady_s"] = steady
@@ -147,7 +147,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", default=None)
     ap.add_argument("--kind", default="aot", choices=("aot", "compiled"),
-                    help="aot: the AOT package (optics.aot); compiled: torch.compile in the process")
+                    help="aot: the AOT package (accel.aot); compiled: torch.compile in the process")
     a = ap.parse_args()
     if a.child:
         print(json.dumps(child(a.child, a.repeats, a.kind)))

@@ -6,7 +6,7 @@ points, started on the plane z = −5 mm before surface 1) to the image plane, C
 - ``optiland``: optiland 0.6.3's real-ray tracer (numpy backend), ``optic.surfaces.trace`` on
   ``RealRays`` (ray generation excluded, as for lensopt), float64;
 - ``eager``: ``lensopt.optics.trace.trace``;
-- ``compiled``: ``lensopt.optics.compiled.compiled_trace`` (``torch.compile``, Inductor C++);
+- ``compiled``: ``lensopt.accel.compiled.compiled_trace`` (``torch.compile``, Inductor C++);
 - ``sketch``: ``benchmarks/trace/soa_sketch.py``, a compiled component-wise sphere + Snell loop — not
   lensopt, the ceiling a component-wise formulation of the trace would reach (``--no-ceiling``).
 
@@ -46,7 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: pro
 from procmem import vm_kb  # noqa: E402
 from soa_sketch import sketch_runner  # noqa: E402
 
-from lensopt.optics.compiled import compiled_trace, component_major_rays  # noqa: E402
+from lensopt.accel.compiled import compiled_trace, component_major_rays  # noqa: E402
 from lensopt.optics.trace import Rays, trace  # noqa: E402
 from lensopt.spec import build, load_spec  # noqa: E402
 

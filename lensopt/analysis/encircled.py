@@ -31,6 +31,7 @@ from torch import Tensor
 from lensopt.analysis.checks import fields_of
 from lensopt.analysis.psf_reference import debye_intensity, wavefront_error
 from lensopt.analysis.spot import spot_stats
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.lens import Lens, System
@@ -70,12 +71,14 @@ class EnergyCurves:
     airy_radius_mm: float
 
 
-def _centers(lens: Lens, system: System, rel_field: Tensor, center: str, bundle_stats: Tensor) -> Tensor:
+def _centers(lens: Lens, system: System, rel_field: Tensor, center: str, bundle_stats: Tensor, *,
+             engine: Engine | None = None) -> Tensor:
     if center == "centroid":
         return bundle_stats
     if center != "chief":
         raise ValueError(f"center must be one of {CENTERS}, got {center!r}")
-    chief = trace_bundle(lens, system, torch.zeros(1, 2, dtype=lens.dtype, device=lens.device), rel_field=rel_field)
+    chief = trace_bundle(lens, system, torch.zeros(1, 2, dtype=lens.dtype, device=lens.device), rel_field=rel_field,
+                         engine=engine)
     return chief.result.pos[:, system.reference, 0, :2]
 
 
@@ -92,19 +95,20 @@ def _airy(lens: Lens, system: System) -> float:
 
 @torch.no_grad()
 def geometric_energy(lens: Lens, system: System, *, rel_field: Tensor, radii: Tensor | None = None,
-                     sampling: str = "rings:32", center: str = "centroid", pupil: Tensor | None = None
+                     sampling: str = "rings:32", center: str = "centroid", pupil: Tensor | None = None,
+                     engine: Engine | None = None
                      ) -> EnergyCurves:
     """Geometric encircled/ensquared energy from the rays of ``sampling`` (see the module docstring), or
     of the full-pupil points ``pupil`` ((P, 2)) when given; ``radii`` default: 101 radii up to 1.1 × the
     largest ray distance (201 radii)."""
     if pupil is None:
         scheme = PupilSampling.parse(sampling, path="encircled.sampling")
-        pupil, half = scheme.points(dtype=lens.dtype, device=lens.device), scheme.half
+        pupil, half = scheme.points(dtype=lens.dtype, device=lens.device, engine=engine), scheme.half
     else:
         half = False
     rel_field = fields_of(lens, system, rel_field)
-    b = trace_bundle(lens, system, pupil.to(lens.dtype), half_pupil=half, rel_field=rel_field)
-    c = _centers(lens, system, rel_field, center, spot_stats(b, system.wavelength_weights).centroid)
+    b = trace_bundle(lens, system, pupil.to(lens.dtype), half_pupil=half, rel_field=rel_field, engine=engine)
+    c = _centers(lens, system, rel_field, center, spot_stats(b, system.wavelength_weights).centroid, engine=engine)
     xy, valid = b.result.pos[..., :2], b.result.valid
     d = xy - c[:, None, None, :]
     r = torch.linalg.vector_norm(d, dim=-1)
@@ -145,7 +149,7 @@ def pupil_cell_area(alpha: Tensor, beta: Tensor, amp: Tensor, n: int) -> Tensor:
 @torch.no_grad()
 def diffraction_energy(lens: Lens, system: System, *, rel_field: Tensor, radii: Tensor | None = None,
                        pupil_samples: int | None = None, pitch_mm: float | None = None, center: str = "centroid",
-                       sampling: str = "rings:16") -> EnergyCurves:
+                       sampling: str = "rings:16", engine: Engine | None = None) -> EnergyCurves:
     """Diffraction encircled/ensquared energy (see the module docstring).
 
     Args:
@@ -160,7 +164,7 @@ def diffraction_energy(lens: Lens, system: System, *, rel_field: Tensor, radii: 
     wn = abs(float(fo.working_fnumber))
     airy = _airy(lens, system)
     rel_field = fields_of(lens, system, rel_field)
-    geo = geometric_energy(lens, system, rel_field=rel_field, sampling=sampling, center=center)
+    geo = geometric_energy(lens, system, rel_field=rel_field, sampling=sampling, center=center, engine=engine)
     if radii is None:
         extent = float(geo.radius_mm[-1]) / 1.1
         radii = torch.linspace(0.0, extent + 6.0 * airy, 201, dtype=lens.dtype, device=lens.device)
@@ -176,7 +180,7 @@ def diffraction_energy(lens: Lens, system: System, *, rel_field: Tensor, radii: 
     pitch = pitch_mm or airy / 12.0
     half = math.ceil(r_max / pitch) + 1
     coord = torch.arange(-half, half + 1, dtype=torch.float64, device=lens.device) * pitch
-    opd, alpha, beta, amp = wavefront_error(lens, system, rel_field, geo.center, n)
+    opd, alpha, beta, amp = wavefront_error(lens, system, rel_field, geo.center, n, engine=engine)
     area = pupil_cell_area(alpha, beta, amp, n)
     rr = torch.sqrt(coord[None, :] ** 2 + coord[:, None] ** 2)  # (Y, X)
     sq = coord.abs()

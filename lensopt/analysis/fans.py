@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from lensopt.engine import Engine
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import FirstOrder
@@ -68,6 +69,7 @@ def ray_fans(
     rel_field: Tensor | None = None,
     aim: str | None = None,
     fo: FirstOrder | None = None,
+    engine: Engine | None = None,
 ) -> RayFans:
     """Trace the tangential and sagittal fans of ``lens`` for every field and wavelength.
 
@@ -88,7 +90,7 @@ def ray_fans(
     sag_pts = fan(points, "sagittal", dtype=dtype, device=device)
     origin = torch.zeros(1, 2, dtype=dtype, device=device)
     pupil = torch.cat([origin, tan_pts, sag_pts])  # (1 + 2·points, 2)
-    bundle = trace_bundle(lens, system, pupil, rel_field=rel_field, aim=aim, fo=fo)
+    bundle = trace_bundle(lens, system, pupil, rel_field=rel_field, aim=aim, fo=fo, engine=engine)
     pos, valid = bundle.result.pos, bundle.result.valid  # (F, W, P, 3), (F, W, P)
 
     ref = system.reference

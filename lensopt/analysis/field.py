@@ -20,6 +20,7 @@ from lensopt.analysis.illumination import (
     relative_illumination_three_ray,
 )
 from lensopt.analysis.spot import spot_stats
+from lensopt.engine import Engine
 from lensopt.optics.bundle import Bundle, pupil_shape, trace_bundle
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import field_tangents, first_order
@@ -84,6 +85,7 @@ def field_summary(
     rel_field: Tensor | Sequence[float] | None = None,
     aim: str | None = None,
     aim_steps: int | None = None,
+    engine: Engine | None = None,
 ) -> FieldSummary:
     """Distortion and relative illumination per field, with the pupil data behind them.
 
@@ -109,13 +111,15 @@ def field_summary(
             fixed = torch.tensor(system.vignetting, dtype=dtype, device=device).unsqueeze(1)
         shape = pupil_shape(lens, system, tan, fo, aim=mode, aim_steps=steps, vignetting=fixed)
         opts = {"rel_field": fields, "aim": mode, "aim_steps": steps, "fo": fo, "shape": shape}
-        bundle = trace_bundle(lens, system, sampling.points(dtype=dtype, device=device), half_pupil=sampling.half,
-                              pupil_weights=sampling.weights(dtype=dtype, device=device), **opts)
+        pts = sampling.points(dtype=dtype, device=device, engine=engine)
+        bundle = trace_bundle(lens, system, pts, half_pupil=sampling.half,
+                              pupil_weights=sampling.weights(dtype=dtype, device=device), **opts, engine=engine)
         stats = spot_stats(bundle, system.wavelength_weights)
         dist = distortion(lens, system, bundle, stats)
         y_par = paraxial_heights(lens, system, bundle)
         ri_std = relative_illumination_std(bundle, system.wavelength_weights)
-        three = trace_bundle(lens, system, torch.tensor(THREE_RAY_PUPIL, dtype=dtype, device=device), **opts)
+        three = trace_bundle(lens, system, torch.tensor(THREE_RAY_PUPIL, dtype=dtype, device=device), **opts,
+                             engine=engine)
         ri_three = relative_illumination_three_ray(three, system.reference)
     keep = slice(None) if has_axis else slice(1, None)
     num_w = lens.wavelength_um.shape[0]

@@ -29,6 +29,7 @@ import torch
 from torch import Tensor
 
 from lensopt.analysis.checks import fields_of
+from lensopt.engine import Engine
 from lensopt.materials import Material
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.lens import Lens, System
@@ -80,13 +81,13 @@ def _crossing(q1: Tensor, d1: Tensor, q2: Tensor, d2: Tensor, axis: int) -> Tens
 
 
 def field_curves(lens: Lens, system: System, rel_field: Tensor, *, delta: float = DEFAULT_DELTA,
-                 aim: str | None = None) -> FieldCurves:
+                 aim: str | None = None, engine: Engine | None = None) -> FieldCurves:
     """Field curvature, distortion and lateral colour at the relative fields ``rel_field`` ((F,)).
     Differentiable in the lens."""
     dt, dev = lens.dtype, lens.device
     pupil = torch.tensor([[0.0, 0.0], [0.0, -delta], [0.0, delta], [-delta, 0.0], [delta, 0.0]], dtype=dt, device=dev)
     fo = first_order(lens, system)
-    b = trace_bundle(lens, system, pupil, rel_field=fields_of(lens, system, rel_field), aim=aim, fo=fo)
+    b = trace_bundle(lens, system, pupil, rel_field=fields_of(lens, system, rel_field), aim=aim, fo=fo, engine=engine)
     q, d, ok = b.result.pos, b.result.dir, b.result.valid  # (F, W, 5, ...)
     tan = _crossing(q[:, :, 1], d[:, :, 1], q[:, :, 2], d[:, :, 2], 1)
     sag = _crossing(q[:, :, 3], d[:, :, 3], q[:, :, 4], d[:, :, 4], 0)

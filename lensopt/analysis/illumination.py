@@ -29,7 +29,7 @@ THREE_RAY_PUPIL = ((1.0, 0.0), (0.0, -1.0), (0.0, 1.0))
 def _reference_field(bundle: Bundle) -> Tensor:
     """(1,) index of the field closest to the axis, a tensor: no Python int and no indexing by a 0-d
     tensor (both read a value out of the tensor, which a captured graph of the residuals,
-    ``optim.compiled_jacobian``, cannot do); use with ``index_select``."""
+    ``accel.jacobian``, cannot do); use with ``index_select``."""
     return torch.argmin(bundle.rel_field.detach()).reshape(1)
 
 

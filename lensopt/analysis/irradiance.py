@@ -22,9 +22,10 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.optics.aiming import aim_full, stop_radius
-from lensopt.optics.backend import trace_with
+from lensopt.optics.bundle import trace_rays
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import field_tangents, first_order
 from lensopt.optics.sampling import launch
@@ -66,6 +67,7 @@ def relative_illumination_flux(
     d_rel: float = 1e-3,
     aim_steps: int = 3,
     max_rays: int = 2_000_000,
+    engine: Engine | None = None,
 ) -> FluxIllumination:
     """Relative illumination by counting passing rays on a ``grid`` × ``grid`` pupil grid per field.
 
@@ -118,7 +120,7 @@ def relative_illumination_flux(
                 part = pupil[lo:lo + tile]
                 rays = launch(clipped, system, part.expand(len(g), num_w, *part.shape), tan,
                               epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z)
-                res = trace_with(clipped, rays)
+                res = trace_rays(clipped, rays, engine=engine)
                 ok = res.valid
                 if system.front_aperture is not None:
                     fa = system.front_aperture

@@ -15,6 +15,7 @@ import torch
 from torch import Tensor
 
 from lensopt.analysis.report import LensModel, auto_semi_diameters
+from lensopt.engine import Engine
 from lensopt.materials import Air
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import fan
@@ -61,7 +62,8 @@ class Layout:
     front_aperture: tuple[float, float] | None = None
 
 
-def layout(model: LensModel, *, aim: str | None = None, rays_per_field: int = 7, samples: int = 101) -> Layout:
+def layout(model: LensModel, *, aim: str | None = None, rays_per_field: int = 7, samples: int = 101,
+           engine: Engine | None = None) -> Layout:
     """Profiles, semi-diameters and traced meridional rays of ``model`` at the reference wavelength.
 
     Args:
@@ -73,7 +75,7 @@ def layout(model: LensModel, *, aim: str | None = None, rays_per_field: int = 7,
     dtype, device = lens.dtype, lens.device
     with torch.no_grad():
         given = lens.semi_diameter > 0
-        auto = torch.tensor(auto_semi_diameters(model, aim=aim), dtype=dtype, device=device)
+        auto = torch.tensor(auto_semi_diameters(model, aim=aim, engine=engine), dtype=dtype, device=device)
         sd = torch.where(given, lens.semi_diameter, auto)
         vertex = lens.vertex_z()
 
@@ -88,7 +90,7 @@ def layout(model: LensModel, *, aim: str | None = None, rays_per_field: int = 7,
             defined.append(ok)
 
         bundle = trace_bundle(lens, system, fan(rays_per_field, "tangential", dtype=dtype, device=device),
-                              aim=aim, record=True)
+                              aim=aim, record=True, engine=engine)
         ref = system.reference
         rays = bundle.rays
         start = _start_points(rays.pos[:, ref], rays.dir[:, ref], vertex, model)

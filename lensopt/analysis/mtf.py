@@ -27,6 +27,7 @@ from lensopt.analysis.psf import mirror_half_pupil
 from lensopt.analysis.psf_reference import diffraction_psf
 from lensopt.analysis.psf_stack import PsfSettings, compute_psfs
 from lensopt.analysis.spot import spot_stats
+from lensopt.engine import Engine
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import first_order
@@ -102,14 +103,14 @@ def mtf_from_psf(psf: Tensor, pitch_mm: float, frequency: Tensor, *, bin_power: 
     return torch.sqrt(sr * sr + si * si), torch.sqrt(tr * tr + ti * ti)
 
 
-def ray_otf(lens: Lens, system: System, rel_field: Tensor, frequency: Tensor, *, sampling: str = "rings:32"
-            ) -> tuple[tuple[Tensor, Tensor], tuple[Tensor, Tensor]]:
+def ray_otf(lens: Lens, system: System, rel_field: Tensor, frequency: Tensor, *, sampling: str = "rings:32",
+            engine: Engine | None = None) -> tuple[tuple[Tensor, Tensor], tuple[Tensor, Tensor]]:
     """Geometric OTF per field and wavelength from the ray intercepts themselves (every ray the same
     pupil area): ``Σ_r exp(−2πi ν (x_r − x̄)) / n`` along x (sagittal) and y (tangential), about the
     field's polychromatic centroid; failed rays carry no weight. Returns (re, im) pairs of (F, W, K)."""
     scheme = PupilSampling.parse(sampling, path="mtf.sampling")
-    bundle = trace_bundle(lens, system, scheme.points(dtype=lens.dtype, device=lens.device),
-                          half_pupil=scheme.half, rel_field=rel_field)
+    bundle = trace_bundle(lens, system, scheme.points(dtype=lens.dtype, device=lens.device, engine=engine),
+                          half_pupil=scheme.half, rel_field=rel_field, engine=engine)
     center = spot_stats(bundle, system.wavelength_weights).centroid  # (F, 2)
     xy, valid = bundle.result.pos[..., :2], bundle.result.valid
     if bundle.half_pupil:
@@ -143,6 +144,7 @@ def lens_mtf(
     sampling: str = "rings:32",
     size: int | None = None,
     pupil_samples: int | None = None,
+    engine: Engine | None = None,
 ) -> MtfResult:
     """Polychromatic sagittal/tangential MTF per field.
 
@@ -171,12 +173,12 @@ def lens_mtf(
     weights = weights / weights.sum()
     if method == "reference":
         settings = PsfSettings(sampling=sampling, kernel="count", pitch_mm=pitch, diffraction="none")
-        geo = compute_psfs(lens, system, rel_field, settings, fo=fo)
+        geo = compute_psfs(lens, system, rel_field, settings, fo=fo, engine=engine)
         if size is None:
             airy = 8 * 1.22 * float(lens.wavelength_um.max()) * 1e-3 * abs(wn)
             size = 2 * math.ceil((geo.psf.shape[-1] // 2 * pitch + airy) / pitch) + 1
         psf = diffraction_psf(lens, system, rel_field, geo.center, pitch_mm=pitch, size=size,
-                              pupil_samples=pupil_samples)
+                              pupil_samples=pupil_samples, engine=engine)
         poly = torch.einsum("fwij,w->fij", psf.to(lens.dtype), weights)
         sag, tan = mtf_from_psf(poly, pitch, frequency.to(lens.dtype), bin_power=1)
     else:
@@ -185,7 +187,7 @@ def lens_mtf(
         # closed-form MTF of the diffraction-limited pupil (= the geometric PSF convolved with the
         # full, untruncated Airy intensity), then sums over wavelengths.
         nu = frequency.to(lens.dtype)
-        (sr, si), (tr, ti) = ray_otf(lens, system, rel_field, nu, sampling=sampling)  # (F, W, K)
+        (sr, si), (tr, ti) = ray_otf(lens, system, rel_field, nu, sampling=sampling, engine=engine)  # (F, W, K)
         w = weights[None, :, None]
         if method == "heuristic":
             dl = torch.stack([diffraction_limited_mtf(nu, float(lam), wn) for lam in lens.wavelength_um])

@@ -19,6 +19,7 @@ from torch import Tensor
 from lensopt.analysis.checks import fields_of
 from lensopt.analysis.checks import frequencies as check_frequencies
 from lensopt.analysis.mtf import MTF_METHODS, lens_mtf
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import field_tangents
@@ -54,13 +55,13 @@ def _method(method: str) -> str:
 
 @torch.no_grad()
 def mtf_vs_field(lens: Lens, system: System, frequency: Tensor | list[float], *, fields: int | Tensor = 11,
-                 method: str = "heuristic", sampling: str = "rings:32") -> MtfField:
+                 method: str = "heuristic", sampling: str = "rings:32", engine: Engine | None = None) -> MtfField:
     """Sagittal/tangential MTF at ``frequency`` (cycles/mm, each > 0) over ``fields`` relative fields
     (a count spread over 0 … 1, or the (F,) fields themselves)."""
     nu = check_frequencies(frequency, path="frequency", dtype=lens.dtype, device=lens.device)
     rel = (torch.linspace(0.0, 1.0, int(fields), dtype=lens.dtype, device=lens.device)
            if isinstance(fields, int) else fields_of(lens, system, fields))
-    res = lens_mtf(lens, system, nu, rel_field=rel, method=_method(method), sampling=sampling)
+    res = lens_mtf(lens, system, nu, rel_field=rel, method=_method(method), sampling=sampling, engine=engine)
     deg = torch.rad2deg(torch.atan(field_tangents(lens, system, rel)))
     return MtfField(frequency=nu, rel_field=rel, field_deg=deg, sagittal=res.sagittal, tangential=res.tangential,
                     method=method, cutoff=res.cutoff)
@@ -98,7 +99,7 @@ class ThroughFocus:
 @torch.no_grad()
 def through_focus_mtf(lens: Lens, system: System, frequency: Tensor | list[float], *, focus_mm: Tensor,
                       rel_field: Tensor | None = None, method: str = "heuristic",
-                      sampling: str = "rings:32") -> ThroughFocus:
+                      sampling: str = "rings:32", engine: Engine | None = None) -> ThroughFocus:
     """MTF at ``frequency`` at every image shift ``focus_mm`` ((Z,) mm) for ``rel_field`` (default: the
     system's fields)."""
     nu = check_frequencies(frequency, path="frequency", dtype=lens.dtype, device=lens.device)
@@ -108,7 +109,8 @@ def through_focus_mtf(lens: Lens, system: System, frequency: Tensor | list[float
         raise LensoptError("needs a list of focus shifts", path="focus", got=focus.tolist())
     sag, tan = [], []
     for dz in focus:
-        r = lens_mtf(defocused(lens, dz), system, nu, rel_field=rel_field, method=_method(method), sampling=sampling)
+        r = lens_mtf(defocused(lens, dz), system, nu, rel_field=rel_field, method=_method(method), sampling=sampling,
+                     engine=engine)
         sag.append(r.sagittal)
         tan.append(r.tangential)
     s, t = torch.stack(sag), torch.stack(tan)

@@ -24,6 +24,7 @@ import torch
 from torch import Tensor
 
 from lensopt.analysis.wavefront import map_grid, trace_to_sphere
+from lensopt.engine import Engine
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import first_order
 
@@ -39,7 +40,7 @@ def pupil_samples_for(half_width_mm: float, wavelength_um: float, working_fnumbe
 
 
 def wavefront_error(
-    lens: Lens, system: System, rel_field: Tensor, center: Tensor, n: int
+    lens: Lens, system: System, rel_field: Tensor, center: Tensor, n: int, *, engine: Engine | None = None
 ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
     """Optical path and Debye direction cosines on an N×N entrance-pupil grid, from
     ``analysis.wavefront.trace_to_sphere`` (the reference sphere about P0, CODE V's radius).
@@ -57,7 +58,7 @@ def wavefront_error(
     """
     dt = lens.dtype
     pupil, inside = map_grid(n, dtype=dt, device=lens.device)
-    st = trace_to_sphere(lens, system, pupil, rel_field=rel_field, center=center)
+    st = trace_to_sphere(lens, system, pupil, rel_field=rel_field, center=center, engine=engine)
     ok = st.valid & inside
     amp = ok.to(dt)
     mean = (st.opl * amp).sum(-1, keepdim=True) / amp.sum(-1, keepdim=True).clamp_min(1.0)
@@ -78,13 +79,14 @@ def diffraction_psf(
     pupil_samples: int | None = None,
     subsamples: int = 3,
     chunk: int = 16384,
+    engine: Engine | None = None,
 ) -> Tensor:
     """(F, W, S, S) diffraction PSFs on grids centred on ``center`` ((F, 2) mm), each summing to 1,
     in the orientation of ``lensopt.analysis.psf`` (row index grows with +y)."""
     wn = float(first_order(lens, system).working_fnumber)
     half = (size // 2 + 0.5) * pitch_mm
     n = pupil_samples or pupil_samples_for(half, float(lens.wavelength_um.min()), wn)
-    opd, alpha, beta, amp = wavefront_error(lens, system, rel_field, center.to(lens.dtype), n)
+    opd, alpha, beta, amp = wavefront_error(lens, system, rel_field, center.to(lens.dtype), n, engine=engine)
     o = subsamples
     j = torch.arange(size * o, dtype=torch.float64, device=lens.device)
     coord = (j - (size * o - 1) / 2) * (pitch_mm / o)  # sub-pixel sample positions, mm

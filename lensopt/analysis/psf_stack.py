@@ -15,6 +15,7 @@ from torch import Tensor
 from lensopt.analysis.psf import KERNELS, bin_down, deposit, grid_size_for, mirror_half_pupil
 from lensopt.analysis.psf_diffraction import airy_field, diffraction_heuristic, incoherent_airy
 from lensopt.analysis.spot import spot_stats
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.optics.bundle import Bundle, trace_bundle
 from lensopt.optics.lens import Lens, System
@@ -103,10 +104,11 @@ def select_wavelengths(lens: Lens, system: System, keep: list[int]) -> tuple[Len
     return lens2, system2
 
 
-def _trace(lens: Lens, system: System, sampling: PupilSampling, rel_field: Tensor, fo: FirstOrder) -> Bundle:
+def _trace(lens: Lens, system: System, sampling: PupilSampling, rel_field: Tensor, fo: FirstOrder, *,
+           engine: Engine | None = None) -> Bundle:
     """The one place where PSFs trace rays."""
-    return trace_bundle(lens, system, sampling.points(dtype=lens.dtype, device=lens.device),
-                        half_pupil=sampling.half, rel_field=rel_field, fo=fo)
+    return trace_bundle(lens, system, sampling.points(dtype=lens.dtype, device=lens.device, engine=engine),
+                        half_pupil=sampling.half, rel_field=rel_field, fo=fo, engine=engine)
 
 
 def compute_psfs(
@@ -116,6 +118,7 @@ def compute_psfs(
     settings: PsfSettings,
     *,
     fo: FirstOrder | None = None,
+    engine: Engine | None = None,
 ) -> PsfStack:
     """PSF stack of ``lens`` for relative fields ``rel_field`` at every wavelength of the lens.
 
@@ -130,7 +133,7 @@ def compute_psfs(
     """
     sampling = PupilSampling.parse(settings.sampling, seed=settings.seed, path="psf.sampling")
     fo = first_order(lens, system) if fo is None else fo
-    bundle = _trace(lens, system, sampling, rel_field, fo)
+    bundle = _trace(lens, system, sampling, rel_field, fo, engine=engine)
     res = bundle.result
     stats = spot_stats(bundle, system.wavelength_weights)
     center = stats.centroid  # (F, 2)

@@ -15,6 +15,7 @@ import torch
 
 from lensopt.analysis.field import field_summary
 from lensopt.analysis.spot import spot_stats
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.materials import Material
 from lensopt.optics.bundle import pupil_shape, trace_bundle
@@ -46,7 +47,8 @@ def _nm(wavelength_um: float) -> float:
 
 
 def trace_report(
-    model: LensModel, sampling: PupilSampling, *, aim: str | None = None, aim_steps: int | None = None
+    model: LensModel, sampling: PupilSampling, *, aim: str | None = None, aim_steps: int | None = None,
+    engine: Engine | None = None
 ) -> dict[str, Any]:
     """First-order data, per-field spot sizes, failures, distortion, relative illumination, pupil
     (vignetting, aiming) data, notes, and the resolved prescription."""
@@ -56,7 +58,7 @@ def trace_report(
     mode = aim or system.aim
     with torch.no_grad():
         fo = first_order(lens, system)
-        summary = field_summary(lens, system, sampling, aim=mode)
+        summary = field_summary(lens, system, sampling, aim=mode, engine=engine)
         bundle = summary.bundle
         field_weights = (torch.tensor(system.field_weights, dtype=lens.dtype, device=lens.device)
                          if system.field_weights else None)
@@ -65,8 +67,8 @@ def trace_report(
         # centre (not aimed), whatever vignetting does to the bundle around it.
         bare = dataclasses.replace(system, vignetting=(), front_aperture=None)
         chief = trace_bundle(lens, bare, torch.zeros(1, 2, dtype=lens.dtype), aim="chief" if mode == "full" else mode,
-                             fo=fo)
-        sd = auto_semi_diameters(dataclasses.replace(model, system=system), aim=mode)
+                             fo=fo, engine=engine)
+        sd = auto_semi_diameters(dataclasses.replace(model, system=system), aim=mode, engine=engine)
     ref = system.reference
     fields = []
     for h in range(len(system.rel_field)):
@@ -173,7 +175,8 @@ def prescription(model: LensModel, auto_sd: list[float]) -> list[dict[str, Any]]
     return out
 
 
-def auto_semi_diameters(model: LensModel, *, aim: str | None = None, n: int = 21) -> list[float]:
+def auto_semi_diameters(model: LensModel, *, aim: str | None = None, n: int = 21,
+                        engine: Engine | None = None) -> list[float]:
     """Clear semi-apertures from traced rays: the largest ray height on each surface over all fields
     and wavelengths (``grid:n`` pupil plus its rim), as optical design programs do when none is given."""
     lens, system = model.lens, model.system
@@ -181,7 +184,7 @@ def auto_semi_diameters(model: LensModel, *, aim: str | None = None, n: int = 21
     rim = torch.stack([torch.cos(theta), torch.sin(theta)], -1)
     pupil = torch.cat([pupil_grid(n, dtype=lens.dtype), rim])
     with torch.no_grad():
-        bundle = trace_bundle(lens, system, pupil, aim=aim, record=True)
+        bundle = trace_bundle(lens, system, pupil, aim=aim, record=True, engine=engine)
     out = []
     for hit in bundle.result.hits:
         h = torch.linalg.vector_norm(hit.pos[..., :2], dim=-1)
@@ -259,7 +262,7 @@ def ray_report(
 
 
 def mtf_report(model: LensModel, frequencies: list[float], *, method: str = "heuristic",
-               sampling: str = "rings:32") -> dict[str, Any]:
+               sampling: str = "rings:32", engine: Engine | None = None) -> dict[str, Any]:
     """MTF per field at ``frequencies`` (cycles/mm) as plain data (``trace --json --mtf``)."""
     from lensopt.analysis.mtf import MTF_METHODS, lens_mtf  # PSF machinery: only when asked for
 
@@ -269,6 +272,6 @@ def mtf_report(model: LensModel, frequencies: list[float], *, method: str = "heu
         raise LensoptError("expected non-negative frequencies in cycles/mm, comma-separated", path="--mtf",
                            got=frequencies)
     nu = torch.tensor(frequencies, dtype=model.lens.dtype)
-    r = lens_mtf(model.lens, model.system, nu, method=method, sampling=sampling)
+    r = lens_mtf(model.lens, model.system, nu, method=method, sampling=sampling, engine=engine)
     return {"method": method, "frequencies_per_mm": frequencies, "cutoff_per_mm": r.cutoff,
             "rel_field": r.rel_field.tolist(), "sagittal": r.sagittal.tolist(), "tangential": r.tangential.tolist()}

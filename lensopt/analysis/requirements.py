@@ -26,16 +26,18 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import torch
 
-from lensopt.analysis.field import field_summary
+from lensopt.analysis.field import FieldSummary, field_summary
+from lensopt.engine import Engine
 from lensopt.materials import design_catalog
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.lens import Lens, System
-from lensopt.optics.paraxial import first_order
+from lensopt.optics.paraxial import FirstOrder, first_order
 from lensopt.optics.sampling import PupilSampling
-from lensopt.optics.trace import Status
+from lensopt.optics.trace import RayTrace, Status
 
 __all__ = ["Requirements", "Check", "check_requirements", "failed", "table_s8", "table_s12"]
 
@@ -95,8 +97,8 @@ def failed(checks: list[Check]) -> list[str]:
     return [c.name for c in checks if not c.ok]
 
 
-def _pupil(grid: int, rim: int) -> torch.Tensor:
-    pts = PupilSampling.parse(f"grid:{grid}").points(dtype=torch.float64)
+def _pupil(grid: int, rim: int, *, engine: Engine | None = None) -> torch.Tensor:
+    pts = PupilSampling.parse(f"grid:{grid}").points(dtype=torch.float64, engine=engine)
     phi = torch.linspace(0, 2 * math.pi, rim + 1, dtype=torch.float64)[:-1]
     return torch.cat([pts, torch.stack([phi.cos(), phi.sin()], -1)])
 
@@ -111,6 +113,7 @@ def check_requirements(
     fields: int = 11,
     grid: int = 41,
     rim: int = 64,
+    engine: Engine | None = None,
 ) -> list[Check]:
     """Check ``req`` on a dense ray sample of the lens.
 
@@ -120,98 +123,130 @@ def check_requirements(
         materials: the catalog name of each glass element (for ``req.catalog``), None for model glasses.
         fields: number of equidistant relative fields 0 … 1 (the design fields are added).
         grid, rim: pupil grid size and number of rim points.
+        engine: trace backend and memory budget (default ``Engine()``).
     """
     rel = sorted(set(torch.linspace(0, 1, fields, dtype=torch.float64).tolist()) | set(system.rel_field))
     dense = dataclasses.replace(system, rel_field=tuple(rel), field_weights=(), vignetting=())
     out: list[Check] = []
     with torch.no_grad():
-        b = trace_bundle(lens, dense, _pupil(grid, rim).to(lens.device), record=True)
+        b = trace_bundle(lens, dense, _pupil(grid, rim, engine=engine).to(lens.device), record=True, engine=engine)
         res = b.result
-        valid = res.valid
         blocked = int((res.status == int(Status.BLOCKED)).sum())
-        n_failed = int((~valid).sum()) - blocked
+        n_failed = int((~res.valid).sum()) - blocked
         out.append(Check("no failed rays", n_failed, "0 (rays stopped by the front aperture aside)",
                          n_failed == 0, {"blocked_by_front_aperture": blocked}))
-        z = torch.stack([h.pos[..., 2] for h in res.hits] + [res.pos[..., 2]])
-        tz = z[1:] - z[:-1]
-        S = lens.num_surfaces
-
-        def vals(x: torch.Tensor) -> tuple[float, float]:
-            x = x[valid]
-            return (float(x.min()), float(x.max())) if x.numel() else (math.nan, math.nan)
-
-        for s in range(S):
-            if s in req.exempt:
-                continue
-            lo, hi = vals(tz[s])
-            ct = float(lens.thickness[s])
-            if s == S - 1:
-                if req.image_min is not None:
-                    out.append(Check(f"gap {s} (image) ≥ {req.image_min:g} mm", lo, f"≥ {req.image_min:g}",
-                                     lo >= req.image_min))
-            elif glass_gaps[s]:
-                if req.glass_min is not None:
-                    out.append(Check(f"glass {s} thickness ≥ {req.glass_min:g} mm", lo, f"≥ {req.glass_min:g}",
-                                     lo >= req.glass_min))
-                if req.glass_max is not None:
-                    out.append(Check(f"glass {s} thickness ≤ {req.glass_max:g} mm", hi, f"≤ {req.glass_max:g}",
-                                     hi <= req.glass_max))
-                if req.glass_ratio is not None:
-                    r = req.glass_ratio
-                    out.append(Check(f"glass {s} edge/centre ratio in [1/{r:g}, {r:g}]",
-                                     f"{lo / ct:.4f} … {hi / ct:.4f}", f"[{1 / r:.4f}, {r:g}]",
-                                     lo / ct >= 1 / r and hi / ct <= r))
-            elif req.air_min is not None:
-                out.append(Check(f"air gap {s} ≥ {req.air_min:g} mm", lo, f"≥ {req.air_min:g}", lo >= req.air_min))
-        for first, end, mn, mx in req.spans:
-            a = first % S
-            e = S if end is None else end % S
-            lo, hi = vals(tz[a:e].sum(0))
-            ok = (mn is None or lo >= mn) and (mx is None or hi <= mx)
-            out.append(Check(f"span surface {a} → {'image' if end is None else e}", f"{lo:.4f} … {hi:.4f}",
-                             f"[{mn}, {mx}]", ok))
-        interfaces = [s for s in range(S) if lens.shapes[s].diffractive
-                      or bool((lens.index[s] != lens.index[s + 1]).any())]
-        if req.max_angle_deg is not None:
-            c2 = torch.stack([torch.stack([res.hits[s].cos2_in, res.hits[s].cos2_out]) for s in interfaces])
-            c2 = torch.where(valid, c2, torch.ones_like(c2)).clamp(0, 1)
-            worst = math.degrees(math.acos(math.sqrt(float(c2.min()))))
-            out.append(Check("angles of incidence/refraction", worst, f"≤ {req.max_angle_deg:g}°",
-                             worst <= req.max_angle_deg))
-        if req.max_normal_deg is not None:
-            nz = torch.stack([res.hits[s].normal[..., 2].abs() for s in interfaces])
-            nz = torch.where(valid, nz, torch.ones_like(nz)).clamp(0, 1)
-            worst = math.degrees(math.acos(float(nz.min())))
-            out.append(Check("surface normals", worst, f"≤ {req.max_normal_deg:g}°", worst <= req.max_normal_deg))
+        out += _gap_checks(lens, req, res, glass_gaps)
+        out += _angle_checks(lens, req, res)
         if req.max_distortion_percent is not None or req.min_illumination is not None:
-            summ = field_summary(lens, system, PupilSampling.parse(f"grid:{grid}"), rel_field=rel)
-            if req.max_distortion_percent is not None:
-                d = 100 * float(summ.distortion.abs().max())
-                out.append(Check("|distortion|", d, f"≤ {req.max_distortion_percent:g} %",
-                                 d <= req.max_distortion_percent))
-            if req.min_illumination is not None:
-                ri = float(summ.ri_std.min())
-                out.append(Check("relative illumination (S52)", ri, f"≥ {req.min_illumination:g}",
-                                 ri >= req.min_illumination, {"three_ray_min": float(summ.ri_three_ray.min())}))
-        fo = first_order(lens, system)
-        for name, target, got in (("EFL", req.efl, fo.efl), ("paraxial image height", req.image_height,
-                                                            fo.paraxial_image_height),
-                                  ("total track", req.total_track, fo.total_track)):
-            if target is not None:
-                v = float(got)
-                out.append(Check(name, v, f"{target:g} ± {100 * req.first_order_rtol:g} %",
-                                 abs(v - target) <= req.first_order_rtol * abs(target)))
+            summ = field_summary(lens, system, PupilSampling.parse(f"grid:{grid}"), rel_field=rel, engine=engine)
+            out += _field_checks(req, summ)
+        out += _first_order_checks(req, first_order(lens, system))
     if req.catalog is not None:
-        def key(name: str) -> str:  # "ohara:S-BAL3" and the catalog's "S-BAL 3" are the same glass
-            return name.split(":")[-1].replace(" ", "").upper()
-
-        allowed = {key(n) for n in (design_catalog(req.catalog).names if isinstance(req.catalog, str)
-                                    else req.catalog)}
-        names = [m for m in materials if m is not None]
-        bad = [m for m in materials if m is None or key(m) not in allowed]
-        out.append(Check("catalog glasses", ", ".join(str(m) for m in names), "named catalog entries", not bad,
-                         {"not_in_catalog": bad}))
+        out.append(_catalog_check(req.catalog, materials))
     return out
+
+
+def _valid_range(x: torch.Tensor, valid: torch.Tensor) -> tuple[float, float]:
+    """(min, max) of ``x`` over the valid rays (NaN, NaN when none is valid)."""
+    x = x[valid]
+    return (float(x.min()), float(x.max())) if x.numel() else (math.nan, math.nan)
+
+
+def _gap_checks(lens: Lens, req: Requirements, res: RayTrace, glass_gaps: list[bool]) -> list[Check]:
+    """Axial ray paths t_z of every gap (glass, air, image) and of the spans, against ``req``."""
+    out: list[Check] = []
+    z = torch.stack([h.pos[..., 2] for h in res.hits] + [res.pos[..., 2]])
+    tz = z[1:] - z[:-1]
+    S = lens.num_surfaces
+    for s in range(S):
+        if s in req.exempt:
+            continue
+        lo, hi = _valid_range(tz[s], res.valid)
+        ct = float(lens.thickness[s])
+        if s == S - 1:
+            if req.image_min is not None:
+                out.append(Check(f"gap {s} (image) ≥ {req.image_min:g} mm", lo, f"≥ {req.image_min:g}",
+                                 lo >= req.image_min))
+        elif glass_gaps[s]:
+            if req.glass_min is not None:
+                out.append(Check(f"glass {s} thickness ≥ {req.glass_min:g} mm", lo, f"≥ {req.glass_min:g}",
+                                 lo >= req.glass_min))
+            if req.glass_max is not None:
+                out.append(Check(f"glass {s} thickness ≤ {req.glass_max:g} mm", hi, f"≤ {req.glass_max:g}",
+                                 hi <= req.glass_max))
+            if req.glass_ratio is not None:
+                r = req.glass_ratio
+                out.append(Check(f"glass {s} edge/centre ratio in [1/{r:g}, {r:g}]",
+                                 f"{lo / ct:.4f} … {hi / ct:.4f}", f"[{1 / r:.4f}, {r:g}]",
+                                 lo / ct >= 1 / r and hi / ct <= r))
+        elif req.air_min is not None:
+            out.append(Check(f"air gap {s} ≥ {req.air_min:g} mm", lo, f"≥ {req.air_min:g}", lo >= req.air_min))
+    for first, end, mn, mx in req.spans:
+        a = first % S
+        e = S if end is None else end % S
+        lo, hi = _valid_range(tz[a:e].sum(0), res.valid)
+        ok = (mn is None or lo >= mn) and (mx is None or hi <= mx)
+        out.append(Check(f"span surface {a} → {'image' if end is None else e}", f"{lo:.4f} … {hi:.4f}",
+                         f"[{mn}, {mx}]", ok))
+    return out
+
+
+def _angle_checks(lens: Lens, req: Requirements, res: RayTrace) -> list[Check]:
+    """Angles of incidence/refraction and of the surface normals at every interface, against ``req``."""
+    out: list[Check] = []
+    valid = res.valid
+    interfaces = [s for s in range(lens.num_surfaces) if lens.shapes[s].diffractive
+                  or bool((lens.index[s] != lens.index[s + 1]).any())]
+    if req.max_angle_deg is not None:
+        c2 = torch.stack([torch.stack([res.hits[s].cos2_in, res.hits[s].cos2_out]) for s in interfaces])
+        c2 = torch.where(valid, c2, torch.ones_like(c2)).clamp(0, 1)
+        worst = math.degrees(math.acos(math.sqrt(float(c2.min()))))
+        out.append(Check("angles of incidence/refraction", worst, f"≤ {req.max_angle_deg:g}°",
+                         worst <= req.max_angle_deg))
+    if req.max_normal_deg is not None:
+        nz = torch.stack([res.hits[s].normal[..., 2].abs() for s in interfaces])
+        nz = torch.where(valid, nz, torch.ones_like(nz)).clamp(0, 1)
+        worst = math.degrees(math.acos(float(nz.min())))
+        out.append(Check("surface normals", worst, f"≤ {req.max_normal_deg:g}°", worst <= req.max_normal_deg))
+    return out
+
+
+def _field_checks(req: Requirements, summ: FieldSummary) -> list[Check]:
+    """Distortion and relative illumination over the dense fields, against ``req``."""
+    out: list[Check] = []
+    if req.max_distortion_percent is not None:
+        d = 100 * float(summ.distortion.abs().max())
+        out.append(Check("|distortion|", d, f"≤ {req.max_distortion_percent:g} %", d <= req.max_distortion_percent))
+    if req.min_illumination is not None:
+        ri = float(summ.ri_std.min())
+        out.append(Check("relative illumination (S52)", ri, f"≥ {req.min_illumination:g}",
+                         ri >= req.min_illumination, {"three_ray_min": float(summ.ri_three_ray.min())}))
+    return out
+
+
+def _first_order_checks(req: Requirements, fo: FirstOrder) -> list[Check]:
+    """EFL, paraxial image height and total track against their targets (relative tolerance)."""
+    out: list[Check] = []
+    for name, target, got in (("EFL", req.efl, fo.efl), ("paraxial image height", req.image_height,
+                                                        fo.paraxial_image_height),
+                              ("total track", req.total_track, fo.total_track)):
+        if target is not None:
+            v = float(got)
+            out.append(Check(name, v, f"{target:g} ± {100 * req.first_order_rtol:g} %",
+                             abs(v - target) <= req.first_order_rtol * abs(target)))
+    return out
+
+
+def _catalog_check(catalog: Any, materials: list[str | None]) -> Check:
+    """Every glass element is an entry of ``catalog`` (a catalog name or a list of glass names)."""
+    def key(name: str) -> str:  # "ohara:S-BAL3" and the catalog's "S-BAL 3" are the same glass
+        return name.split(":")[-1].replace(" ", "").upper()
+
+    allowed = {key(n) for n in (design_catalog(catalog).names if isinstance(catalog, str) else catalog)}
+    names = [m for m in materials if m is not None]
+    bad = [m for m in materials if m is None or key(m) not in allowed]
+    return Check("catalog glasses", ", ".join(str(m) for m in names), "named catalog entries", not bad,
+                 {"not_in_catalog": bad})
 
 
 def table_s8(flange_from: int, filter_gap: int, total_track: float) -> Requirements:

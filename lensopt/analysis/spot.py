@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from lensopt.engine import Engine
 from lensopt.optics.bundle import Bundle
 from lensopt.optics.lens import Lens, System
 
@@ -89,7 +90,7 @@ SEED_SAMPLING = "grid:61"
 """Pupil sampling of the seed's ESR: a 61 × 61 cell-centred grid over the full pupil (dense)."""
 
 
-def seed_esr(lens: Lens, system: System) -> Tensor:
+def seed_esr(lens: Lens, system: System, *, engine: Engine | None = None) -> Tensor:
     """() Effective spot radius (mm) on the seed's measure (S4.2.1, S7): ``SEED_FIELDS`` equally spaced
     relative fields 0 … 1 with equal weights, the system's wavelength weights, a dense full-pupil grid
     (``SEED_SAMPLING``) and the system's aiming and front aperture, whatever fields and sampling the
@@ -98,6 +99,6 @@ def seed_esr(lens: Lens, system: System) -> Tensor:
     from lensopt.optics.sampling import PupilSampling
 
     rel = torch.linspace(0.0, 1.0, SEED_FIELDS, dtype=lens.dtype, device=lens.device)
-    pupil = PupilSampling.parse(SEED_SAMPLING).points(dtype=lens.dtype, device=lens.device)
-    bundle = trace_bundle(lens, system, pupil, rel_field=rel)
+    pupil = PupilSampling.parse(SEED_SAMPLING).points(dtype=lens.dtype, device=lens.device, engine=engine)
+    bundle = trace_bundle(lens, system, pupil, rel_field=rel, engine=engine)
     return spot_stats(bundle, system.wavelength_weights).effective_radius

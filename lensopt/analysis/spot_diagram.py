@@ -13,6 +13,7 @@ import torch
 from torch import Tensor
 
 from lensopt.analysis.spot import SpotStats, spot_stats
+from lensopt.engine import Engine
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import FirstOrder
@@ -74,6 +75,7 @@ def spot_diagram(
     aim: str | None = None,
     rel_field: Tensor | None = None,
     fo: FirstOrder | None = None,
+    engine: Engine | None = None,
 ) -> SpotDiagram:
     """Trace the pupil ``sampling`` for every field and wavelength and collect the spot diagrams.
 
@@ -84,12 +86,12 @@ def spot_diagram(
         rel_field: (F,) relative fields; default: the system's.
         fo: precomputed first-order data.
     """
-    pts = sampling.points(dtype=lens.dtype, device=lens.device)
+    pts = sampling.points(dtype=lens.dtype, device=lens.device, engine=engine)
     bundle = trace_bundle(lens, system, pts, half_pupil=sampling.half, rel_field=rel_field, aim=aim, fo=fo,
-                          pupil_weights=sampling.weights(dtype=lens.dtype, device=lens.device))
+                          pupil_weights=sampling.weights(dtype=lens.dtype, device=lens.device), engine=engine)
     fo = bundle.first_order
     chief = trace_bundle(lens, system, torch.zeros(1, 2, dtype=lens.dtype, device=lens.device),
-                         rel_field=bundle.rel_field, aim=aim, fo=fo)
+                         rel_field=bundle.rel_field, aim=aim, fo=fo, engine=engine)
     return SpotDiagram(
         rel_field=bundle.rel_field,
         field_deg=torch.rad2deg(torch.atan(bundle.tan_field)),

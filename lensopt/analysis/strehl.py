@@ -21,6 +21,7 @@ from torch import Tensor
 from lensopt.analysis.checks import fields_of
 from lensopt.analysis.psf_reference import debye_intensity
 from lensopt.analysis.wavefront import Wavefront, map_grid, trace_to_sphere, wavefront_stats
+from lensopt.engine import Engine
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import first_order
 
@@ -73,12 +74,13 @@ class StrehlResult:
 
 
 @torch.no_grad()
-def strehl(lens: Lens, system: System, *, rel_field: Tensor, pupil_samples: int = 64) -> StrehlResult:
+def strehl(lens: Lens, system: System, *, rel_field: Tensor, pupil_samples: int = 64,
+           engine: Engine | None = None) -> StrehlResult:
     """Strehl ratio (PSF peak and Maréchal) of every field and wavelength, from an N×N pupil grid."""
     dt = lens.dtype
     fo = first_order(lens, system)
     pupil, inside = map_grid(pupil_samples, dtype=dt, device=lens.device)
-    st = trace_to_sphere(lens, system, pupil, rel_field=fields_of(lens, system, rel_field), fo=fo)
+    st = trace_to_sphere(lens, system, pupil, rel_field=fields_of(lens, system, rel_field), fo=fo, engine=engine)
     ok = st.valid & inside & st.chief_valid.unsqueeze(-1)
     lam_mm = lens.wavelength_um[None, :, None] * 1e-3
     w = torch.where(ok, (st.chief_opl.unsqueeze(-1) - st.opl) / lam_mm, torch.zeros_like(st.opl))

@@ -41,6 +41,7 @@ from torch import Tensor
 
 from lensopt.analysis.checks import fields_of
 from lensopt.analysis.spot import safe_sqrt
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.optics.bundle import Bundle, trace_bundle
 from lensopt.optics.lens import Lens, System
@@ -113,6 +114,7 @@ def trace_to_sphere(
     center: Tensor | None = None,
     fo: FirstOrder | None = None,
     aim: str | None = None,
+    engine: Engine | None = None,
 ) -> SphereTrace:
     """Trace the chief ray and ``pupil`` ((P, 2) relative pupil points) for every field and wavelength to
     the reference sphere. Differentiable in the lens (fixed shapes, finite placeholders).
@@ -127,7 +129,7 @@ def trace_to_sphere(
     dt, dev = lens.dtype, lens.device
     fo = first_order(lens, system) if fo is None else fo
     pts = torch.cat([torch.zeros(1, 2, dtype=dt, device=dev), pupil.to(dtype=dt, device=dev)])
-    b = trace_bundle(lens, system, pts, rel_field=rel_field, aim=aim, record=True, fo=fo)
+    b = trace_bundle(lens, system, pts, rel_field=rel_field, aim=aim, record=True, fo=fo, engine=engine)
     res = b.result
     opl = optical_path(lens, system, b)
     q, d = res.pos, res.dir  # (F, W, 1+P, 3) on the image surface
@@ -194,10 +196,10 @@ class Wavefront:
 
 
 def wavefront(lens: Lens, system: System, pupil: Tensor, *, rel_field: Tensor | None = None,
-              fo: FirstOrder | None = None, aim: str | None = None) -> Wavefront:
+              fo: FirstOrder | None = None, aim: str | None = None, engine: Engine | None = None) -> Wavefront:
     """W at the pupil points ``pupil`` ((P, 2)) of every field and wavelength, referenced to the real
     chief ray and its reference sphere (CODE V's). Differentiable in the lens."""
-    st = trace_to_sphere(lens, system, pupil, rel_field=rel_field, fo=fo, aim=aim)
+    st = trace_to_sphere(lens, system, pupil, rel_field=rel_field, fo=fo, aim=aim, engine=engine)
     lam_mm = lens.wavelength_um[None, :, None] * 1e-3
     ok = st.valid & st.chief_valid.unsqueeze(-1)
     w = (st.chief_opl.unsqueeze(-1) - st.opl) / lam_mm
@@ -231,14 +233,14 @@ class OpdFans:
 
 
 def opd_fans(lens: Lens, system: System, *, points: int = 65, rel_field: Tensor | None = None,
-             fo: FirstOrder | None = None) -> OpdFans:
+             fo: FirstOrder | None = None, engine: Engine | None = None) -> OpdFans:
     """Tangential and sagittal OPD fans of every field and wavelength, ``points`` per fan (≥ 2)."""
     if points < 2:
         raise LensoptError("must be at least 2", path="points", got=points)
     v = torch.linspace(-1.0, 1.0, points, dtype=lens.dtype, device=lens.device)
     zero = torch.zeros_like(v)
     pupil = torch.cat([torch.stack([zero, v], -1), torch.stack([v, zero], -1)])
-    wf = wavefront(lens, system, pupil, rel_field=fields_of(lens, system, rel_field), fo=fo)
+    wf = wavefront(lens, system, pupil, rel_field=fields_of(lens, system, rel_field), fo=fo, engine=engine)
     t, s = slice(0, points), slice(points, 2 * points)
     return OpdFans(coord=v, tangential=wf.opd[..., t], tangential_valid=wf.valid[..., t], sagittal=wf.opd[..., s],
                    sagittal_valid=wf.valid[..., s], rel_field=wf.rel_field, field_deg=wf.field_deg,
@@ -270,12 +272,12 @@ class WavefrontMap:
 
 
 def wavefront_map(lens: Lens, system: System, *, n: int = 64, rel_field: Tensor | None = None,
-                  fo: FirstOrder | None = None) -> WavefrontMap:
+                  fo: FirstOrder | None = None, engine: Engine | None = None) -> WavefrontMap:
     """W of every field and wavelength on an N×N cell-centred grid of the pupil."""
     if n < 2:
         raise LensoptError("must be at least 2", path="grid", got=n)
     pts, inside = map_grid(n, dtype=lens.dtype, device=lens.device)
-    wf = wavefront(lens, system, pts, rel_field=fields_of(lens, system, rel_field), fo=fo)
+    wf = wavefront(lens, system, pts, rel_field=fields_of(lens, system, rel_field), fo=fo, engine=engine)
     ok = wf.valid & inside
     wf = Wavefront(**{**wf.__dict__, "valid": ok, "opd": torch.where(ok, wf.opd, torch.zeros_like(wf.opd))})
     shape = (*wf.opd.shape[:2], n, n)
@@ -346,7 +348,7 @@ def wavefront_stats(wf: Wavefront) -> WavefrontStats:
 
 
 def rms_wavefront_error(lens: Lens, system: System, pupil: Tensor, *, rel_field: Tensor | None = None,
-                        fo: FirstOrder | None = None, tilt: bool = True) -> Tensor:
+                        fo: FirstOrder | None = None, tilt: bool = True, engine: Engine | None = None) -> Tensor:
     """(F, W) RMS wavefront error in waves, piston (and with ``tilt`` also tilt) removed, over the valid
     rays of ``pupil`` ((P, 2); use an equal-area sampling such as ``map_grid``'s points inside the circle).
 
@@ -354,7 +356,7 @@ def rms_wavefront_error(lens: Lens, system: System, pupil: Tensor, *, rel_field:
     gradients everywhere (a perfect wavefront has RMS 0 with a zero, not NaN, gradient): safe under
     ``torch.func.jacfwd``/``vmap`` for use as an optimization residual.
     """
-    wf = wavefront(lens, system, pupil, rel_field=rel_field, fo=fo)
+    wf = wavefront(lens, system, pupil, rel_field=rel_field, fo=fo, engine=engine)
     resid = remove_tilt(wf.pupil, wf.opd, wf.valid, tilt=tilt)
     m = wf.valid.to(resid.dtype)
     mean_sq = (resid * resid * m).sum(-1) / m.sum(-1).clamp_min(1.0)

@@ -28,7 +28,7 @@ from lensopt.cli import (
     trace,
     warmup,
 )
-from lensopt.cli.common import LensoptGroup, LowerLevelFormatter
+from lensopt.cli.common import LensoptGroup, LowerLevelFormatter, invocation
 from lensopt.cli.signals import state
 from lensopt.errors import LensoptError
 
@@ -64,13 +64,13 @@ def main(verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Debug lo
              "--max-memory", help="Memory budget, e.g. 4G (default: half the machine's memory).")] = None,
          version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True,
                                                help="Print the version and exit.")] = False) -> None:
-    from lensopt import resources
+    from lensopt.engine import parse_size
 
     state.verbose = verbose
-    resources.set_budget(None)
+    invocation.max_memory = None
     if max_memory is not None:
         try:
-            resources.set_budget(resources.parse_size(max_memory))
+            invocation.max_memory = parse_size(max_memory)
         except LensoptError as err:
             raise typer.BadParameter(err.message + f" (got {max_memory!r})", param_hint="'--max-memory'") from None
     handler = logging.StreamHandler(sys.stderr)  # one plain line per message: "warning: ..."

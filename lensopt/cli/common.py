@@ -1,7 +1,7 @@
 """What every ``lensopt`` command shares (CLI layer): the consoles, option aliases and their parsing, the
-device and backend options, loading a lens, the error contract (``handle_errors``, ``LensoptGroup``) and
-output paths. Light on purpose: nothing here imports torch, so ``lensopt --help`` starts fast. Signals:
-``lensopt.cli.signals``.
+device and backend options, the command's ``Engine`` (``make_engine``), loading a lens, the error
+contract (``handle_errors``, ``LensoptGroup``) and output paths. Light on purpose: nothing here imports torch,
+so ``lensopt --help`` starts fast. Signals: ``lensopt.cli.signals``.
 
 The contract (README, "Errors and exit codes"): 0 success; 2 a problem the user can fix, printed as one
 line ``error: path.to.field: what is wrong (got X)`` (bad input, usage errors, output paths, memory
@@ -36,13 +36,14 @@ from lensopt.errors import LensoptError
 from lensopt.files import json_safe
 
 if TYPE_CHECKING:
+    from lensopt.engine import Engine
     from lensopt.spec import Model
 
 __all__ = ["AimOpt", "AimStepsOpt", "BackendOpt", "DeviceOpt", "EX_INTERNAL", "JsonOpt", "LensArg", "LensoptGroup",
            "check_scheduler",
            "LowerLevelFormatter", "SamplingOpt", "SeedOpt", "check_aim", "check_aim_steps", "check_output",
            "check_seed", "console", "err_console", "handle_errors", "load_model", "parse_frequencies",
-           "parse_sampling", "print_json", "with_backend"]
+           "invocation", "make_engine", "parse_sampling", "print_json"]
 
 EX_USAGE, EX_INTERNAL = 2, 70
 F = TypeVar("F", bound=Callable[..., Any])
@@ -155,24 +156,41 @@ def handle_errors(fn: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
-def with_backend(fn: F) -> F:
-    """Run the command with its ``backend`` argument as the trace backend (``use_backend``) and report a
-    first compilation on stderr; goes under ``handle_errors`` so that a bad name is one line, exit 2."""
+def make_engine(backend: str | None = None, *, report_compiles: bool | None = None,
+                retain_freed_memory: bool = False) -> Engine:
+    """The command's ``Engine`` (``lensopt.engine``), made once per command from its options and the
+    environment: the trace backend is ``backend`` (the command's ``--backend``), else ``$LENSOPT_BACKEND``,
+    else auto; the memory budget is the root ``--max-memory``, else ``$LENSOPT_MAX_MEMORY``, else the
+    default. ``report_compiles`` (default: when the command has ``--backend``) prints a first compilation
+    of the trace on stderr."""
+    from lensopt import accel
+    from lensopt.engine import check_backend, parse_size
 
-    @functools.wraps(fn)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        from lensopt.optics.backend import on_compile, use_backend  # torch: imported when a command runs
+    if backend is None:
+        name = check_backend(os.environ.get("LENSOPT_BACKEND", "auto"), path="LENSOPT_BACKEND")
+    else:
+        name = check_backend(backend)
+    max_memory = invocation.max_memory
+    if max_memory is None and os.environ.get("LENSOPT_MAX_MEMORY"):
+        max_memory = parse_size(os.environ["LENSOPT_MAX_MEMORY"], path="LENSOPT_MAX_MEMORY")
+    report = backend is not None if report_compiles is None else report_compiles
+    return accel.engine(name, max_memory=max_memory, on_compile=_report_compile if report else None,
+                        retain_freed_memory=retain_freed_memory)
 
-        remove = on_compile(lambda desc, s: err_console.print(
-            f"compiled the trace for {desc} in {s:.1f} s (first time on this machine; cached on disk)",
-            highlight=False))
-        try:
-            with use_backend(kwargs.get("backend", "auto")):
-                return fn(*args, **kwargs)
-        finally:
-            remove()
 
-    return wrapper  # type: ignore[return-value]
+class _Invocation:
+    """The root options of the running ``lensopt`` invocation (set by ``lensopt.cli.app``'s callback, reset
+    by ``LensoptGroup.main``)."""
+
+    max_memory: int | None = None  # --max-memory, bytes
+
+
+invocation = _Invocation()
+
+
+def _report_compile(desc: str, seconds: float) -> None:
+    err_console.print(f"compiled the trace for {desc} in {seconds:.1f} s (first time on this machine; cached on disk)",
+                      highlight=False)
 
 
 class LensoptGroup(TyperGroup):
@@ -194,6 +212,7 @@ class LensoptGroup(TyperGroup):
         code = 0
         state.signal_exit, state.signal_reported, state.signal_received, state.verbose = EX_SIGINT, False, False, False
         fit_width(console, sys.stdout)
+        invocation.max_memory = None
         try:
             with command_signals():
                 rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)

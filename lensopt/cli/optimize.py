@@ -14,12 +14,22 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
-from lensopt.cli.common import JsonOpt, SeedOpt, check_output, console, err_console, handle_errors, print_json
+from lensopt.cli.common import (
+    JsonOpt,
+    SeedOpt,
+    check_output,
+    console,
+    err_console,
+    handle_errors,
+    make_engine,
+    print_json,
+)
 from lensopt.cli.signals import report_signal, signal_word, signals_deferred, state
 from lensopt.errors import LensoptError
 
 if TYPE_CHECKING:
-    from lensopt.optim.run import OptimizeResult, Progress
+    from lensopt.engine import Engine
+    from lensopt.optim.driver import OptimizeResult, Progress
 
 __all__ = ["LiveProgress", "commands", "plain_line", "render_summary", "summary"]
 
@@ -188,17 +198,14 @@ def optimize(
     log_dir: Annotated[Path | None, typer.Option("--log-dir", help="restored: TensorBoard folder.")] = None,
 ) -> None:
     """Levenberg–Marquardt (or Adam) for spot size with solves and constraints; Ctrl-C keeps the best lens."""
-    from lensopt.analysis.report import trace_report
-    from lensopt.design import build_problem
     from lensopt.design import optimize as run_optimize
-    from lensopt.optics.sampling import DEFAULT_REPORT_SAMPLING, PupilSampling
-    from lensopt.optim.report import constraint_report
-    from lensopt.spec import build, load_spec, save_json
+    from lensopt.spec import load_spec, save_json
 
     if output.suffix.lower() != ".json":
         raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
     check_output(output)
     start_spec = load_spec(spec)
+    engine = make_engine(retain_freed_memory=True)
     if start_spec.optimize is not None and start_spec.optimize.objective == "restored":
         if full_weight:
             raise LensoptError("applies to the spot and raw objectives (restored has no weight schedules)",
@@ -206,7 +213,7 @@ def optimize(
         from lensopt.cli.restore import optimize_restored
 
         return optimize_restored(start_spec, output, steps=steps, seed=seed, checkpoint=checkpoint, resume=resume,
-                                 device=device, log_dir=log_dir, quiet=quiet, as_json=as_json)
+                                 device=device, log_dir=log_dir, quiet=quiet, as_json=as_json, engine=engine)
     if jacobian == "compiled" and not quiet:
         err_console.print("compiled LM Jacobian: loaded from this machine's package for the problem, or built at "
                           "the first step of each phase when there is none (minutes of CPU; `lensopt "
@@ -214,7 +221,7 @@ def optimize(
     try:
         with LiveProgress(err_console, enabled=not quiet) as live:
             result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live,
-                                  device=device, jacobian=jacobian, full_weight=full_weight)
+                                  device=device, jacobian=jacobian, full_weight=full_weight, engine=engine)
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the first step: the best lens is the start lens
         with signals_deferred():
             save_json(start_spec, output)
@@ -222,10 +229,7 @@ def optimize(
         raise typer.Exit(report_signal(line)) from None
     with signals_deferred():  # a second signal waits until the file is complete
         save_json(result.spec, output)  # atomic
-    sampling = PupilSampling.parse(DEFAULT_REPORT_SAMPLING, seed=seed, weighted=True)
-    final_problem = build_problem(result.spec, seed=seed)
-    s = summary(result, trace_report(build(start_spec), sampling), trace_report(build(result.spec), sampling),
-                constraint_report(final_problem, final_problem.theta0, sampling), str(output))
+    s = _summary_of(start_spec, result, seed, str(output), engine)
     if as_json:
         print_json(s)
     else:
@@ -233,3 +237,19 @@ def optimize(
     if result.interrupted:  # the summary above says so
         state.signal_reported = True
         raise typer.Exit(state.signal_exit)
+
+
+def _summary_of(start_spec: Any, result: OptimizeResult, seed: int, output: str, engine: Engine) -> dict[str, Any]:
+    """``summary`` of a finished run: both lenses traced as ``lensopt trace`` does (its default sampling),
+    the final lens's constraint margins."""
+    from lensopt.analysis.report import trace_report
+    from lensopt.design import build_problem
+    from lensopt.optics.sampling import DEFAULT_REPORT_SAMPLING, PupilSampling
+    from lensopt.optim.report import constraint_report
+    from lensopt.spec import build
+
+    sampling = PupilSampling.parse(DEFAULT_REPORT_SAMPLING, seed=seed, weighted=True)
+    final_problem = build_problem(result.spec, seed=seed, engine=engine)
+    return summary(result, trace_report(build(start_spec), sampling, engine=engine),
+                   trace_report(build(result.spec), sampling, engine=engine),
+                   constraint_report(final_problem, final_problem.theta0, sampling), output)

@@ -24,12 +24,13 @@ from lensopt.cli.common import (
     err_console,
     handle_errors,
     load_model,
+    make_engine,
     parse_sampling,
-    with_backend,
 )
 from lensopt.errors import LensoptError
 
 if TYPE_CHECKING:
+    from lensopt.engine import Engine
     from lensopt.spec import Model
 
 __all__ = ["plot_app"]
@@ -70,8 +71,9 @@ def plot_layout_cmd(lens: LensArg, output: OutOpt, aim: AimOpt = None,
     from lensopt.plot import plot_layout, save_figure
 
     out = _check_output(output)
+    engine = make_engine()
     model = load_model(lens)
-    data = layout(model, aim=check_aim(aim), rays_per_field=rays)
+    data = layout(model, aim=check_aim(aim), rays_per_field=rays, engine=engine)
     title, sub = _titles(model)
     save_figure(plot_layout(data, title=title, subtitle=sub), out, dpi=dpi)
     err_console.print(f"wrote {output}")
@@ -90,9 +92,10 @@ def plot_fans_cmd(lens: LensArg, output: OutOpt, aim: AimOpt = None,
     from lensopt.plot import plot_fans, save_figure
 
     out = _check_output(output)
+    engine = make_engine()
     model = load_model(lens)
     with torch.no_grad():
-        fans = ray_fans(model.lens, model.system, points=points, aim=check_aim(aim))
+        fans = ray_fans(model.lens, model.system, points=points, aim=check_aim(aim), engine=engine)
     title, sub = _titles(model)
     save_figure(plot_fans(fans, title=title, subtitle=sub), out, dpi=dpi)
     err_console.print(f"wrote {output}")
@@ -109,10 +112,11 @@ def plot_spots_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
     from lensopt.plot import plot_spots, save_figure
 
     out = _check_output(output)
+    engine = make_engine()
     model = load_model(lens)
     pupil = parse_sampling(sampling, seed)
     with torch.no_grad():
-        spots = spot_diagram(model.lens, model.system, pupil, aim=check_aim(aim))
+        spots = spot_diagram(model.lens, model.system, pupil, aim=check_aim(aim), engine=engine)
     title, sub = _titles(model)
     save_figure(plot_spots(spots, title=title, subtitle=sub), out, dpi=dpi)
     err_console.print(f"wrote {output}")
@@ -120,7 +124,6 @@ def plot_spots_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
 
 @plot_app.command("psf")
 @handle_errors
-@with_backend
 def plot_psf(
     lens: LensArg,
     output: Annotated[Path, typer.Option("--output", "-o", help="Figure file (png, pdf, svg).")],
@@ -135,15 +138,16 @@ def plot_psf(
     dpi: DpiOpt = 150,
 ) -> None:
     """RGB PSFs across the field (the spec's fields)."""
+    engine = make_engine(backend)
     check_output(output, (".png", ".pdf", ".svg"), what="image file")
     _plot_psfs(load_model(lens), output, sampling=rays, kernel=kernel, diffraction=diffraction, pitch_um=pitch_um,
-               sqrt=sqrt, seed=seed, dpi=dpi)
+               sqrt=sqrt, seed=seed, dpi=dpi, engine=engine)
     err_console.print(f"wrote {output}", highlight=False)
 
 
 def _plot_psfs(model: Model, output: Path, *, sampling: str = "rings:32", kernel: str = "triangular",
                diffraction: str = "heuristic", pitch_um: float | None = None, sqrt: bool = False,
-               seed: int = 0, dpi: int = 150) -> None:
+               seed: int = 0, dpi: int = 150, engine: Engine | None = None) -> None:
     """RGB PSFs at the spec's fields, bins of ``pitch_um`` (default: the sensor pitch, else 1 µm)."""
     import torch
 
@@ -165,12 +169,13 @@ def _plot_psfs(model: Model, output: Path, *, sampling: str = "rings:32", kernel
     lens, system = model.lens, model.system
     rel = torch.tensor(system.rel_field, dtype=lens.dtype)
     with torch.no_grad():
-        stack = compute_psfs(lens, system, rel, settings)
+        stack = compute_psfs(lens, system, rel, settings, engine=engine)
     wl = list(spec.spectrum.wavelengths_nm)
     ww, _, _ = channel_weights(camera_of(model).spectrum, 3, wl)  # rgb_weights, 3 wavelengths, or S4.1.2
     ps = PupilSampling.parse(sampling, seed=seed, path="--rays")
     with torch.no_grad():
-        b = trace_bundle(lens, system, ps.points(dtype=lens.dtype), half_pupil=ps.half, rel_field=rel)
+        b = trace_bundle(lens, system, ps.points(dtype=lens.dtype, engine=engine), half_pupil=ps.half, rel_field=rel,
+                         engine=engine)
         rms = (spot_stats(b, system.wavelength_weights).rms_radius * 1e3).tolist()
     save_psf_figure(output, stack, ww, title=spec.name, sqrt=sqrt, rms_um=rms, dpi=dpi)
 
@@ -188,10 +193,11 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
     from lensopt.plot.style import save_figure
 
     out = _check_output(output)
+    engine = make_engine()
     model = load_model(lens)
     summary = field_summary(model.lens, model.system, parse_sampling(sampling, seed),
                             rel_field=[i / (points - 1) for i in range(points)], aim=check_aim(aim),
-                            aim_steps=check_aim_steps(aim_steps))
+                            aim_steps=check_aim_steps(aim_steps), engine=engine)
     title, sub = _titles(model)
     save_figure(field_figure(summary, title=title, subtitle=sub), out, dpi=dpi)
     err_console.print(f"wrote {output}")
@@ -246,6 +252,7 @@ def plot_mtf_cmd(
     out = _check_output(output)
     if method not in MTF_METHODS:
         raise LensoptError(f"must be one of {', '.join(MTF_METHODS)}", path="--method", got=method)
+    engine = make_engine()
     model = load_model(lens)
     fo = first_order(model.lens, model.system)
     wn = float(fo.working_fnumber)
@@ -254,7 +261,7 @@ def plot_mtf_cmd(
     if not top > 0:
         raise LensoptError("must be positive", path="--max-frequency", got=max_frequency)
     nu = torch.linspace(0.0, top, points, dtype=model.lens.dtype)
-    res = lens_mtf(model.lens, model.system, nu, method=method, sampling=sampling)
+    res = lens_mtf(model.lens, model.system, nu, method=method, sampling=sampling, engine=engine)
     field_deg = None
     if model.system.field_type == "angle":
         field_deg = [r * model.system.field_max for r in model.system.rel_field]

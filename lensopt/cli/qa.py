@@ -9,7 +9,7 @@ from typing import Annotated, Any
 import typer
 from rich.table import Table
 
-from lensopt.cli.common import console, err_console, handle_errors, load_model, print_json
+from lensopt.cli.common import console, err_console, handle_errors, load_model, make_engine, print_json
 from lensopt.cli.tables import compact_table, show
 from lensopt.errors import LensoptError
 
@@ -39,12 +39,13 @@ def check(
 
     # ``lensopt check lenses/*.json`` also matches the baseline itself when it lives there.
     lenses = [p for p in lenses if p.resolve() != baseline.resolve()]
+    engine = make_engine("eager", report_compiles=False)  # the memory budget; the backend is the baseline's
     if update:
-        data = qc.update_baseline(lenses, baseline)
+        data = qc.update_baseline(lenses, baseline, engine=engine)
         err_console.print(f"wrote {baseline} ({len(lenses)} lens(es) measured, {len(data['lenses'])} in all)",
                           highlight=False)
         return
-    results = qc.check_lenses(lenses, qc.load_baseline(baseline))
+    results = qc.check_lenses(lenses, qc.load_baseline(baseline), engine=engine)
     if junit is not None:
         write_text_atomic(junit, qc.junit_xml(results))
     if as_json:
@@ -101,11 +102,12 @@ def accuracy(
         raise LensoptError("must be > 0 seconds", path="--budget", got=budget)
     if output is not None and output.suffix.lower() not in (".png", ".pdf", ".svg"):
         raise LensoptError("the plot is written as .png, .pdf or .svg", path="--output", got=str(output))
+    engine = make_engine()
     model = load_model(lens)
     with Progress(console=err_console, transient=True, disable=as_json) as bar:
         task = bar.add_task("measuring", total=1.0)
         result = run_accuracy(model, knobs=names, repeats=repeats,
-                              progress=lambda f, s: bar.update(task, completed=f, description=s))
+                              progress=lambda f, s: bar.update(task, completed=f, description=s), engine=engine)
     data = result.as_json(tgt, budget)
     if output is not None:
         from lensopt.plot.accuracy import accuracy_figure

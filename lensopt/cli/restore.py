@@ -15,7 +15,7 @@ from typing import Annotated, Any
 
 import typer
 
-from lensopt.cli.common import LensArg, console, err_console, handle_errors, load_model
+from lensopt.cli.common import LensArg, console, err_console, handle_errors, load_model, make_engine
 from lensopt.cli.signals import stop_on_signals, stopped_at_step_boundary
 from lensopt.errors import LensoptError
 
@@ -49,69 +49,81 @@ def train_irm_cmd(
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON summary.")] = False,
 ) -> None:
     """Train the restoration network for a fixed lens (S4.3.2): Adam on MAE, cosine schedule."""
-    import dataclasses
-
-    import torch
-
     from lensopt.devices import resolve_device
-    from lensopt.optim.irm import imaging_setup
-    from lensopt.optim.irm_run import train_irm
-    from lensopt.optim.joint import Dist
-    from lensopt.parallel import check_same_settings, init_distributed
-    from lensopt.spec import dump_json
-    from lensopt.spec.restore import configs_from_spec
 
+    engine = make_engine()
     dev = resolve_device(device)
     model = load_model(lens)
+    setup, net, cfg = _training_settings(model, patch=patch, batch=batch, lr=lr, checkpoint_every=checkpoint_every,
+                                         validate_every=validate_every, val_patches=val_patches, seed=seed,
+                                         fields=fields, sampling=sampling, psf_size=psf_size, grid=grid,
+                                         engine=engine)
+    source, val_source, data = data_sources(images, cfg.patch, seed, engine=engine)
+    n_steps = steps or cfg.steps
+    res, dist, dev = _train(model, setup, net, cfg, (source, val_source, data), steps=n_steps, output=output,
+                            resume=resume, device=dev, log_dir=log_dir, show=None if as_json else _train_line(n_steps))
+    if dist.rank == 0:
+        summary = {"checkpoint": res.checkpoint, "steps": res.steps, "interrupted": res.interrupted,
+                   "validation": res.validation, "device": str(dev), "processes": dist.world}
+        if as_json:
+            console.print_json(json.dumps(summary))
+        else:
+            msg = f"wrote {res.checkpoint} (step {res.steps}{', interrupted' if res.interrupted else ''})"
+            console.print(msg, highlight=False)
+    if res.interrupted:
+        raise typer.Exit(stopped_at_step_boundary())
+
+
+def _training_settings(model: Any, *, patch: int | None, batch: int | None, lr: float | None,
+                       checkpoint_every: int | None, validate_every: int | None, val_patches: int | None, seed: int,
+                       fields: int, sampling: str, psf_size: int, grid: str, engine: Any) -> tuple[Any, Any, Any]:
+    """(imaging set-up, network config, training config) of ``train-irm``: the spec's ``[restore]`` with the
+    options given on the command line."""
+    import dataclasses
+
+    from lensopt.design.restore import configs_from_spec
+    from lensopt.restore.capture import imaging_setup
+
     net, cfg = configs_from_spec(model.spec.restore)
     over = {k: v for k, v in dict(batch=batch, patch=patch, lr=lr, checkpoint_every=checkpoint_every,
                                   validate_every=validate_every, validation_patches=val_patches).items()
             if v is not None}
     cfg = dataclasses.replace(cfg, seed=seed, **over)
     setup = imaging_setup(model.camera(), patch=cfg.patch, fields=fields, sampling=sampling, psf_size=psf_size,
-                          grid=parse_grid_text(grid, "--grid"), noise_sigma=cfg.noise_sigma, device=None)
-    net = dataclasses.replace(net, channels=setup.channels)
-    source, val_source, data = data_sources(images, cfg.patch, seed)
-    n_steps = steps or cfg.steps
+                          grid=parse_grid_text(grid, "--grid"), noise_sigma=cfg.noise_sigma, device=None,
+                          engine=engine)
+    return setup, dataclasses.replace(net, channels=setup.channels), cfg
 
+
+def _train_line(n_steps: int) -> Any:
+    """The progress line of ``train-irm`` for one step record."""
     def show(rec: dict[str, Any]) -> None:
-        if as_json:
-            return
         line = f"step {rec['step']}/{n_steps}  MAE {rec['loss']:.5f}  lr {rec['lr']:.2e}  {rec['wall_s']:.2f} s"
         if "psnr_restored" in rec:
             line += f"  | held-out PSNR raw {rec['psnr_raw']:.2f} dB → restored {rec['psnr_restored']:.2f} dB"
         err_console.print(line, highlight=False)
 
-    dist = Dist(*init_distributed(dev))
-    if dev.type == "cuda" and dist.active:
-        dev = torch.device(dist.device)
-        torch.cuda.set_device(dev)
-    try:
+    return show
+
+
+def _train(model: Any, setup: Any, net: Any, cfg: Any, data: tuple[Any, Any, str], *, steps: int, output: Path,
+           resume: bool, device: Any, log_dir: Path | None, show: Any) -> tuple[Any, Any, Any]:
+    """Run ``train-irm`` (under torchrun: this rank's share; rank 0 writes and prints); returns (result,
+    Dist, device)."""
+    from lensopt.parallel import check_same_settings, distributed
+    from lensopt.restore.train import train_irm
+    from lensopt.spec import dump_json
+
+    source, val_source, text = data
+    with distributed(device) as (dist, dev):
         check_same_settings(dist.world, {"spec": model.spec.model_dump(mode="json"), "cfg": repr(cfg),
-                                         "steps": n_steps, "data": data, "resume": resume, "output": str(output)})
+                                         "steps": steps, "data": text, "resume": resume, "output": str(output)})
         with stop_on_signals() as flag:
             res = train_irm(model.spec, dump_json(model.spec), (model.lens, model.system), setup, net, cfg,
-                            source, val_source, steps=n_steps, data=data, output=output, resume=resume,
+                            source, val_source, steps=steps, data=text, output=output, resume=resume,
                             device=dev, log_dir=log_dir, stop=lambda: dist.any(flag[0]),
                             on_progress=show if dist.rank == 0 else None, dist=dist)
-    finally:
-        if dist.active:
-            import torch.distributed as tdist
-
-            tdist.destroy_process_group()
-    if dist.rank != 0:
-        if res.interrupted:
-            raise typer.Exit(stopped_at_step_boundary())
-        return
-    summary = {"checkpoint": res.checkpoint, "steps": res.steps, "interrupted": res.interrupted,
-               "validation": res.validation, "device": str(dev), "processes": dist.world}
-    if as_json:
-        console.print_json(json.dumps(summary))
-    else:
-        msg = f"wrote {res.checkpoint} (step {res.steps}{', interrupted' if res.interrupted else ''})"
-        console.print(msg, highlight=False)
-    if res.interrupted:
-        raise typer.Exit(stopped_at_step_boundary())
+    return res, dist, dev
 
 
 @commands.command("restore")
@@ -131,12 +143,13 @@ def restore_cmd(
     from lensopt.devices import resolve_device
     from lensopt.imaging.io import read_image, write_image
     from lensopt.imaging.scene import parse_region
-    from lensopt.optim.irm_run import load_restorer, restore_image
+    from lensopt.restore.apply import load_restorer, restore_image
 
+    engine = make_engine()
     dev = resolve_device(device)
     model = load_model(lens)
-    net, setup, tile = load_restorer(checkpoint, model, device=dev, option="CHECKPOINT")
-    arr, info = read_image(image)
+    net, setup, tile = load_restorer(checkpoint, model, device=dev, option="CHECKPOINT", engine=engine)
+    arr, info = read_image(image, engine=engine)
     if arr.shape[-1] != net.config.channels:
         raise LensoptError(f"the network restores {net.config.channels}-channel images", path="IMAGE",
                            got=f"{arr.shape[-1]} channels")
@@ -157,53 +170,38 @@ def parse_grid_text(text: str, option: str) -> tuple[int, int]:
     return a, b
 
 
-def data_sources(images: str, patch: int, seed: int) -> tuple[Any, Any, str]:
-    """(training source, held-out source, description) for ``--images DIR|procedural``."""
+def data_sources(images: str, patch: int, seed: int, *, engine: Any = None) -> tuple[Any, Any, str]:
+    """(training source, held-out source, description) for ``--images DIR|procedural``; ``engine``: the
+    memory budget of every image read."""
     from lensopt.imaging.datasets import DeadLeaves, ImageFolder
 
     if images == "procedural":
         return DeadLeaves(seed=seed), DeadLeaves(seed=seed + 1_000_003), "procedural"
-    train = ImageFolder(images, split="train", patch=patch, option="--images")
-    val = ImageFolder(images, split="val", patch=patch, option="--images")
+    train = ImageFolder(images, split="train", patch=patch, option="--images", engine=engine)
+    val = ImageFolder(images, split="val", patch=patch, option="--images", engine=engine)
     return train, val, str(Path(images).resolve())
 
 
 def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed: int, checkpoint: Path | None,
-                      resume: bool, device: str, log_dir: Path | None, quiet: bool, as_json: bool) -> None:
+                      resume: bool, device: str, log_dir: Path | None, quiet: bool, as_json: bool,
+                      engine: Any = None) -> None:
     """``lensopt optimize`` with ``objective = "restored"``: the joint run, then the lens (and, with
     --checkpoint, the network) written; rank 0 only writes and prints under torchrun."""
     from lensopt.design.joint_run import run_joint
     from lensopt.devices import resolve_device
-    from lensopt.optim.joint import Dist
-    from lensopt.parallel import check_same_settings, init_distributed
+    from lensopt.parallel import check_same_settings, distributed
     from lensopt.spec import save_json
 
     if output.suffix.lower() != ".json":
         raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
-    dev = resolve_device(device)
-    dist = Dist(*init_distributed(dev))
-    if dev.type == "cuda" and dist.active:
-        import torch
-
-        dev = torch.device("cuda", dist.rank % torch.cuda.device_count())
-        torch.cuda.set_device(dev)
-    try:
+    with distributed(resolve_device(device)) as (dist, dev):
         check_same_settings(dist.world, {"spec": start_spec.model_dump(mode="json"), "steps": steps, "seed": seed,
                                          "checkpoint": str(checkpoint), "resume": resume})
         loud = dist.rank == 0 and not quiet and not as_json
-
-        def show(rec: dict[str, Any]) -> None:
-            if not loud:
-                return
-            line = (f"step {rec['step']}  batch PSNR after restoration {rec['psnr_batch_db']:.2f} dB  "
-                    f"MAE {rec['mae']:.4f}  λ {rec['damping']:.2e}  ESR {rec['esr_um']:.2f} µm  {rec['wall_s']:.2f} s")
-            if "psnr_restored" in rec:
-                line += f"  | held-out {rec['psnr_raw']:.2f} → {rec['psnr_restored']:.2f} dB"
-            err_console.print(line, highlight=False)
-
         with stop_on_signals() as flag:
             res = run_joint(start_spec, steps=steps, seed=seed, checkpoint=checkpoint, resume=resume, device=dev,
-                            log_dir=log_dir, dist=dist, stop=lambda: dist.any(flag[0]), on_progress=show)
+                            log_dir=log_dir, dist=dist, stop=lambda: dist.any(flag[0]),
+                            on_progress=_joint_line if loud else None, engine=engine)
         if dist.rank == 0:
             save_json(res.spec, output)
             summary = {"output": str(output), "checkpoint": str(checkpoint) if checkpoint else None,
@@ -213,17 +211,25 @@ def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed:
             if as_json:
                 console.print_json(json.dumps(summary))
             else:
-                for n in res.notes:
-                    err_console.print(f"note: {n}", highlight=False)
-                if res.start and res.final:
-                    console.print(f"held-out PSNR raw {res.start['psnr_raw']:.2f} → {res.final['psnr_raw']:.2f} dB, "
-                                  f"restored {res.start['psnr_restored']:.2f} → {res.final['psnr_restored']:.2f} dB",
-                                  highlight=False)
-                console.print(f"wrote {output}" + (f" and {checkpoint}" if checkpoint else ""), highlight=False)
-    finally:
-        if dist.active:
-            import torch.distributed as tdist
-
-            tdist.destroy_process_group()
+                _joint_summary(res, output, checkpoint)
     if res.interrupted:
         raise typer.Exit(stopped_at_step_boundary())
+
+
+def _joint_line(rec: dict[str, Any]) -> None:
+    """The progress line of a joint run for one step record."""
+    line = (f"step {rec['step']}  batch PSNR after restoration {rec['psnr_batch_db']:.2f} dB  "
+            f"MAE {rec['mae']:.4f}  λ {rec['damping']:.2e}  ESR {rec['esr_um']:.2f} µm  {rec['wall_s']:.2f} s")
+    if "psnr_restored" in rec:
+        line += f"  | held-out {rec['psnr_raw']:.2f} → {rec['psnr_restored']:.2f} dB"
+    err_console.print(line, highlight=False)
+
+
+def _joint_summary(res: Any, output: Path, checkpoint: Path | None) -> None:
+    for n in res.notes:
+        err_console.print(f"note: {n}", highlight=False)
+    if res.start and res.final:
+        console.print(f"held-out PSNR raw {res.start['psnr_raw']:.2f} → {res.final['psnr_raw']:.2f} dB, "
+                      f"restored {res.start['psnr_restored']:.2f} → {res.final['psnr_restored']:.2f} dB",
+                      highlight=False)
+    console.print(f"wrote {output}" + (f" and {checkpoint}" if checkpoint else ""), highlight=False)

@@ -25,12 +25,13 @@ from lensopt.cli.common import (
     err_console,
     handle_errors,
     load_model,
+    make_engine,
     print_json,
-    with_backend,
 )
 from lensopt.errors import LensoptError
 
 if TYPE_CHECKING:
+    from lensopt.engine import Engine
     from lensopt.spec import Model
 
 __all__ = ["commands", "parse_grid", "run_simulate"]
@@ -40,7 +41,6 @@ commands = typer.Typer()  # its commands, put in order by lensopt.cli.app
 
 @commands.command("simulate", short_help="Simulate a scene image through the lens.")
 @handle_errors
-@with_backend
 def simulate(
     lens: LensArg,
     image: Annotated[Path, typer.Argument(help="Scene image (PNG/JPEG/TIFF/EXR; 8/16-bit files are sRGB).")],
@@ -65,12 +65,13 @@ def simulate(
 ) -> None:
     """Simulate a scene through the lens, computing only the effects the scene calls for."""
     from lensopt.devices import resolve_device
-    from lensopt.resources import require
 
+    engine = make_engine(backend)
     dev = resolve_device(device)
     psf_grid = parse_grid(grid)
     if psf_grid is not None:  # each cell holds RGB PSFs of up to 161×161 float32 bins, a few copies
-        require(psf_grid[0] * psf_grid[1] * 161 * 161 * 3 * 4 * 4, f"a {grid} PSF grid", lower="--grid", path="--grid")
+        engine.require(psf_grid[0] * psf_grid[1] * 161 * 161 * 3 * 4 * 4, f"a {grid} PSF grid", lower="--grid",
+                       path="--grid")
 
     if not plan_only and output is None:
         raise LensoptError("needed unless --plan", path="--output")
@@ -80,7 +81,7 @@ def simulate(
         raise LensoptError("must lie in [0, 1)", path="--overlap", got=overlap)
     result = run_simulate(load_model(lens, dev), image, output, region=region, effects=effects, reference=reference,
                           plan_only=plan_only, sampling=rays, kernel=kernel, grid=psf_grid, overlap=overlap,
-                          seed=seed, on_plan=None if as_json else render_plan, score=score)
+                          seed=seed, on_plan=None if as_json else render_plan, score=score, engine=engine)
     if as_json:
         print_json(result)
     elif not plan_only:
@@ -113,6 +114,7 @@ def run_simulate(
     seed: int = 0,
     on_plan: Callable[[dict[str, Any]], None] | None = None,
     score: bool = False,
+    engine: Engine | None = None,
 ) -> dict[str, Any]:
     """Plan, report the plan through ``on_plan`` (before running), simulate, write, and score (PSNR/SSIM)
     against ``reference``, or against the input scene when ``score`` — only when asked: SSIM of a
@@ -134,14 +136,14 @@ def run_simulate(
     # Every stage is timed, reading and writing included, so that the table accounts for the wall time.
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    img, info = read_image(image_path, option="IMAGE")
+    img, info = read_image(image_path, option="IMAGE", engine=engine)
     timings["read image"] = time.perf_counter() - t0
     opts = PlanOptions(sampling=sampling, kernel=kernel, grid=grid, overlap=overlap, seed=seed)
     image_info = {"width": info.width, "height": info.height, "channels": info.channels, "bits": info.bits,
                   "encoding": info.encoding, "format": info.format, "path": str(image_path)}
     camera = camera_of(model)
     plan, pilot, reg, sensor = plan_scene(camera, image_info, region=region, effects=parse_effects(effects),
-                                          options=opts, timings=timings)
+                                          options=opts, timings=timings, engine=engine)
     plan_json = plan.as_json()
     if on_plan is not None:
         on_plan(plan_json)
@@ -149,7 +151,7 @@ def run_simulate(
         return plan_json
     assert output is not None  # checked by the caller
     with torch.inference_mode():
-        res = run_plan(camera, plan, pilot, reg, sensor, img, opts, timings)
+        res = run_plan(camera, plan, pilot, reg, sensor, img, opts, timings, engine=engine)
     if reference is not None or not score:  # the scene is needed now only to score against it: free it
         del img
     t0 = time.perf_counter()
@@ -157,25 +159,33 @@ def run_simulate(
     timings["write image"] = time.perf_counter() - t0
     metrics = None
     if reference is not None or score:
-        from lensopt.imaging.io import linear_to_srgb
-        from lensopt.imaging.metrics import psnr, ssim  # skimage (and scipy) only when scoring
+        import lensopt.imaging.metrics  # noqa: F401 - skimage (and scipy), imported only when scoring, untimed
 
         t0 = time.perf_counter()
-        if reference is not None:
-            ref, _ = read_image(reference, option="--reference")
-            if ref.shape != res.image.shape:
-                raise LensoptError(f"must have the simulated image's shape {res.image.shape}", path="--reference",
-                                   got=ref.shape)
-            against = str(reference)
-        else:
-            ref, against = img, "the input scene"
-        metrics = {"against": against, "psnr_db": psnr(ref, res.image, transform=linear_to_srgb),
-                   "ssim": ssim(ref, res.image, transform=linear_to_srgb), "space": "sRGB-encoded [0, 1]"}
+        metrics = _score(res.image, img if reference is None else None, reference, engine)
         timings["scores (PSNR, SSIM)"] = time.perf_counter() - t0
     return {"plan": plan_json, "timings": timings, "output": str(output), "output_encoding": encoding,
             "input_encoding": f"{info.encoding} {info.bits}-bit {'float' if info.is_float else 'integer'}"
                               + (" (linearized)" if info.encoding == "sRGB" else ""),
             "metrics": metrics}
+
+
+def _score(image: Any, scene: Any, reference: Path | None, engine: Engine | None) -> dict[str, Any]:
+    """PSNR and SSIM (sRGB-encoded) of the simulated ``image`` against ``reference`` (a file of its shape) or
+    else against the input ``scene``."""
+    from lensopt.imaging.io import linear_to_srgb, read_image
+    from lensopt.imaging.metrics import psnr, ssim  # skimage (and scipy) only when scoring
+
+    if reference is not None:
+        ref, _ = read_image(reference, option="--reference", engine=engine)
+        if ref.shape != image.shape:
+            raise LensoptError(f"must have the simulated image's shape {image.shape}", path="--reference",
+                               got=ref.shape)
+        against = str(reference)
+    else:
+        ref, against = scene, "the input scene"
+    return {"against": against, "psnr_db": psnr(ref, image, transform=linear_to_srgb),
+            "ssim": ssim(ref, image, transform=linear_to_srgb), "space": "sRGB-encoded [0, 1]"}
 
 
 def render_plan(p: dict[str, Any]) -> None:
@@ -216,7 +226,6 @@ def render_run(r: dict[str, Any]) -> None:
 
 @commands.command("evaluate")
 @handle_errors
-@with_backend
 def evaluate(
     lens: LensArg,
     images: Annotated[Path | None, typer.Option("--images", help="Folder of PNG/JPEG/TIFF/EXR images (DIV2K: "
@@ -246,6 +255,7 @@ def evaluate(
     from lensopt.optics.sampling import PupilSampling
     from lensopt.spec import camera_of
 
+    engine = make_engine(backend)
     dev = resolve_device(device)
     if patch < 8:
         raise LensoptError("must be at least 8 pixels", path="--patch", got=patch)
@@ -260,13 +270,13 @@ def evaluate(
     model = load_model(lens, dev)
     camera = camera_of(model)
     tile_grid(sensor_of(camera, patch, patch)[0], patch, option="--patch")  # bad sensor/patch: before the bar
-    scenes, names, desc = scene_source(images, count=count, patch=patch, seed=seed)
+    scenes, names, desc = scene_source(images, count=count, patch=patch, seed=seed, engine=engine)
     options = PlanOptions(sampling=rays, kernel=kernel, grid=parse_grid(grid), seed=seed)
     hooks: list[Any] = [None]
     if irm is not None:
-        from lensopt.optim.irm_run import restoration_hook
+        from lensopt.restore.apply import restoration_hook
 
-        hooks.append(restoration_hook(model, irm))
+        hooks.append(restoration_hook(model, irm, engine=engine))
     results = []
     for hook in hooks:
         with Progress(TextColumn("evaluating" if hook is None else "restoring"), BarColumn(),
@@ -274,7 +284,7 @@ def evaluate(
                       transient=True, disable=as_json) as bar:
             task = bar.add_task("scenes", total=len(names))
             results.append(run_evaluate(camera, scenes, names, patch=patch, seed=seed, options=options,
-                                        noise_sigma=noise, rings=rings, images=desc, restore=hook,
+                                        noise_sigma=noise, rings=rings, images=desc, restore=hook, engine=engine,
                                         progress=lambda done, total, b=bar, t=task: b.update(t, completed=done)))
     if as_json:
         out = results[0].as_json()

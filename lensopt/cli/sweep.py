@@ -14,7 +14,16 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from lensopt.cli.common import JsonOpt, SeedOpt, check_scheduler, console, err_console, handle_errors, print_json
+from lensopt.cli.common import (
+    JsonOpt,
+    SeedOpt,
+    check_scheduler,
+    console,
+    err_console,
+    handle_errors,
+    make_engine,
+    print_json,
+)
 from lensopt.cli.signals import report_signal, signal_word, state
 from lensopt.cli.tables import compact_table, show
 from lensopt.errors import LensoptError
@@ -179,6 +188,7 @@ def sweep(
     from lensopt.study.sweep import Settings, expand_grid, run_sweep
 
     sched = check_scheduler(scheduler)
+    engine = make_engine(retain_freed_memory=True)
     base = load_spec(spec)
     try:
         text = spec.read_text(encoding="utf-8")
@@ -192,7 +202,7 @@ def sweep(
         result = run_sweep(base, text, varies, settings, output, scheduler=sched, workers=workers,
                            restart=restart, spec_name=base.name or spec.name, callback=progress, points=points,
                            on_plan=None if quiet or as_json else lambda why: err_console.print(
-                               f"sweep: the tasks run {why}", highlight=False))
+                               f"sweep: the tasks run {why}", highlight=False), engine=engine)
     if as_json:
         print_json({"output": str(output), "complete": result.complete, "interrupted": result.interrupted,
                     "computed": result.computed, "skipped": result.skipped, "elapsed_s": result.elapsed_s,

@@ -21,10 +21,10 @@ from lensopt.cli.common import (
     console,
     handle_errors,
     load_model,
+    make_engine,
     parse_frequencies,
     parse_sampling,
     print_json,
-    with_backend,
 )
 from lensopt.cli.tables import compact_table, matrix_tables, show
 from lensopt.errors import LensoptError
@@ -36,7 +36,6 @@ commands = typer.Typer()  # its commands, put in order by lensopt.cli.app
 
 @commands.command("trace", short_help="First-order data, spot sizes, failures, distortion, illumination.")
 @handle_errors
-@with_backend
 def trace(lens: LensArg, sampling: SamplingOpt = "gauss:16", aim: AimOpt = None, seed: SeedOpt = 0,
           as_json: JsonOpt = False, aim_steps: AimStepsOpt = None,
           mtf: Annotated[str | None, typer.Option("--mtf", help="Also MTF at these cycles/mm (comma-separated; "
@@ -63,11 +62,12 @@ def trace(lens: LensArg, sampling: SamplingOpt = "gauss:16", aim: AimOpt = None,
 
     if zernike not in ORDERINGS:
         raise LensoptError(f"must be one of {', '.join(ORDERINGS)}", path="--zernike", got=zernike)
+    engine = make_engine(backend)
     model = load_model(lens)
     report = trace_report(model, parse_sampling(sampling, seed),
-                          aim=check_aim(aim), aim_steps=check_aim_steps(aim_steps))
+                          aim=check_aim(aim), aim_steps=check_aim_steps(aim_steps), engine=engine)
     if mtf is not None:
-        report["mtf"] = mtf_report(model, parse_frequencies(mtf, "--mtf"))
+        report["mtf"] = mtf_report(model, parse_frequencies(mtf, "--mtf"), engine=engine)
     if wavefront or seidel:
         from lensopt.analysis.wavefront_report import seidel_report, wavefront_report
 

@@ -1,5 +1,5 @@
-"""``lensopt warmup``: compile a lens's trace once on this machine (library: ``lensopt.optics.aot``), and with
-``--jacobian`` the LM Jacobian of a spec's optimization problem (``lensopt.optim.compiled_jacobian``)."""
+"""``lensopt warmup``: compile a lens's trace once on this machine (library: ``lensopt.accel.aot``), and with
+``--jacobian`` the LM Jacobian of a spec's optimization problem (``lensopt.accel.jacobian``)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Annotated, Any
 
 import typer
 
-from lensopt.cli.common import console, err_console, handle_errors, load_model, print_json
+from lensopt.cli.common import console, err_console, handle_errors, load_model, make_engine, print_json
 from lensopt.errors import LensoptError
 
 __all__ = ["commands"]
@@ -35,11 +35,12 @@ def warmup(
     lens restricted to the wavelengths an RGB simulation uses when that is fewer. With --jacobian, also the
     compiled LM Jacobian of each spec's optimization problem (minutes of CPU; `optimize --jacobian
     compiled` with the same spec and seed then loads it instead of compiling)."""
-    from lensopt.optics import aot
+    from lensopt.accel import aot
 
     rows = []
     models = {path: load_model(path) for path in lenses}  # every input checked before any work
-    problems = {path: _jacobian_problem(path, m.spec, seed) for path, m in models.items()} if jacobian else {}
+    engine = make_engine() if jacobian else None  # the engine `optimize` gets: its backend is in the package key
+    problems = {path: _jacobian_problem(path, m.spec, seed, engine) for path, m in models.items()} if jacobian else {}
     for path, model in models.items():
         lens = model.lens
         if not aot.supported(lens):
@@ -71,13 +72,13 @@ def warmup(
         print_json({"packages": rows})
 
 
-def _jacobian_problem(path: Path, spec: Any, seed: int) -> tuple[Any, str]:
+def _jacobian_problem(path: Path, spec: Any, seed: int, engine: Any) -> tuple[Any, str]:
     """``spec``'s optimization problem as ``optimize`` builds it, and its package key; a one-line error when
     it has none."""
+    from lensopt.accel import jacobian as cj
     from lensopt.design import build_problem
-    from lensopt.optim import compiled_jacobian as cj
 
-    problem = build_problem(spec, seed=seed)
+    problem = build_problem(spec, seed=seed, engine=engine)
     if problem.num_variables == 0:
         raise LensoptError("nothing to optimize: no surface has a vary list", path=str(path))
     key = cj.problem_key(problem)
@@ -89,7 +90,7 @@ def _jacobian_problem(path: Path, spec: Any, seed: int) -> tuple[Any, str]:
 
 def _jacobian_package(path: Path, problem: Any, key: str, as_json: bool) -> dict[str, Any]:
     """Build (or find) the Jacobian package of ``problem``."""
-    from lensopt.optim import compiled_jacobian as cj
+    from lensopt.accel import jacobian as cj
 
     desc = f"LM Jacobian (N = {problem.num_variables}, M = {problem.size}, seed {problem.seed})"
     target = cj.package_path(key)

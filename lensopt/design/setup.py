@@ -10,6 +10,7 @@ from typing import Any
 
 import torch
 
+from lensopt.engine import Engine
 from lensopt.errors import SpecError
 from lensopt.optim import settings as st
 from lensopt.optim.problem import Problem, ProblemSetup, SurfaceInfo
@@ -19,7 +20,7 @@ from lensopt.spec import optim as so
 from lensopt.spec.build import build, camera_of
 from lensopt.spec.models import DiffractiveSurface, LensSpec
 
-__all__ = ["SpecProblem", "build_problem", "problem_setup", "settings_of", "resolve_solves", "prepare_spec",
+__all__ = ["SpecProblem", "build_problem", "problem_setup", "settings_of", "resolve_solves", "with_varied_powers",
            "declare_variables"]
 
 #: Which plain dataclass each pydantic settings model converts to (``settings_of``).
@@ -92,7 +93,7 @@ def _base_of(surf):  # noqa: ANN001, ANN202 - spec surface → its shape part
     return surf.base if isinstance(surf, DiffractiveSurface) else surf
 
 
-def prepare_spec(spec: LensSpec) -> LensSpec:
+def with_varied_powers(spec: LensSpec) -> LensSpec:
     """Copy of ``spec`` where every varied coefficient power exists (0 where the spec has none)."""
     spec = spec.model_copy(deep=True)
     for surf in spec.surfaces:
@@ -149,7 +150,7 @@ def problem_setup(spec: LensSpec, *, dtype: torch.dtype = torch.float64,
     prepared spec it was built from (every varied coefficient power present: what θ writes back into)."""
     opt = settings_of(spec.optimize or so.OptimizeSpec())
     solves = resolve_solves(spec)
-    prepared = prepare_spec(spec)
+    prepared = with_varied_powers(spec)
     declared = declare_variables(prepared)
     model = build(prepared, dtype=dtype, device=device)
     surfaces = tuple(SurfaceInfo(glass_after=not s.is_air, plane=s.type == "plane",
@@ -173,8 +174,8 @@ class SpecProblem(Problem):
 
 
 def build_problem(spec: LensSpec, *, seed: int = 0, dtype: torch.dtype = torch.float64, method: str | None = None,
-                  image_dtype: torch.dtype = torch.float32,
-                  device: torch.device | str | None = None) -> SpecProblem:
+                  image_dtype: torch.dtype = torch.float32, device: torch.device | str | None = None,
+                  engine: Engine | None = None) -> SpecProblem:
     """The optimization problem of ``spec`` (variables, solves, residual groups of its ``[optimize]``).
 
     Args:
@@ -183,7 +184,8 @@ def build_problem(spec: LensSpec, *, seed: int = 0, dtype: torch.dtype = torch.f
         method: ``lm`` or ``adam`` (default: the spec's optimizer).
         image_dtype: dtype of rendered image patches (image objectives).
         device: where every tensor of the problem lives (θ, the lens, the rays, the Jacobian).
+        engine: trace backend and memory budget of the problem's traces (default ``Engine()``).
     """
     setup, prepared = problem_setup(spec, dtype=dtype, device=torch.device(device or "cpu"))
-    return SpecProblem(setup, prepared, seed=seed, method=method, image_dtype=image_dtype)
+    return SpecProblem(setup, prepared, seed=seed, method=method, image_dtype=image_dtype, engine=engine)
 

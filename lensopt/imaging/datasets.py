@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 
 __all__ = ["DeadLeaves", "ImageFolder", "IMAGE_SUFFIXES", "dead_leaves", "is_div2k", "center_crop", "random_crop_flip",
@@ -216,10 +217,12 @@ class ImageFolder:
         option: the CLI option or spec field named in errors.
         cache: decoded images kept in memory (least recently used dropped first; a DIV2K image is
             ≈ 33 MB as float32, so keep it small).
+        engine: whose memory budget every image read must fit (default ``Engine()``).
     """
 
     def __init__(self, root: str | Path, *, split: str = "all", patch: int | tuple[int, int] = 256,
-                 val_fraction: float = 0.1, option: str = "--images", cache: int = 4) -> None:
+                 val_fraction: float = 0.1, option: str = "--images", cache: int = 4,
+                 engine: Engine | None = None) -> None:
         if split not in ("train", "val", "all"):
             raise LensoptError("split must be train, val or all", path=option, got=split)
         if not 0 <= val_fraction < 1:
@@ -230,6 +233,7 @@ class ImageFolder:
         if not root.is_dir():
             raise LensoptError("not a folder", path=option, got=str(root))
         self.option = option
+        self.engine = engine
         self.patch = _check_patch(patch)
         sub = self._div2k_folder(root, split)
         if sub is not None:
@@ -295,7 +299,7 @@ class ImageFolder:
             return self._cache[index]
         from lensopt.imaging.io import read_image
 
-        arr, _ = read_image(self.files[index], option=self.option)
+        arr, _ = read_image(self.files[index], option=self.option, engine=self.engine)
         img = torch.from_numpy(arr).permute(2, 0, 1).contiguous()
         if img.shape[0] == 1:
             img = img.expand(3, -1, -1).contiguous()

@@ -22,7 +22,9 @@ from typing import Any
 
 import numpy as np
 import torch
+from torch import Tensor
 
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.imaging.camera import Camera
 from lensopt.imaging.datasets import DeadLeaves, ImageFolder, center_crop, is_div2k
@@ -79,7 +81,7 @@ SceneFn = Callable[[int], torch.Tensor]
 
 
 def scene_source(images: str | Path | None, *, count: int, patch: int, seed: int,
-                 option: str = "--images") -> tuple[SceneFn, list[str], str]:
+                 option: str = "--images", engine: Engine | None = None) -> tuple[SceneFn, list[str], str]:
     """The scenes to evaluate: ``(scene(k) -> [3, patch, patch] linear float32, names, description)``.
 
     ``images``: a folder (all its images, or ``valid_HR/`` of a DIV2K layout; the first ``count`` in name
@@ -92,7 +94,7 @@ def scene_source(images: str | Path | None, *, count: int, patch: int, seed: int
         names = [f"dead-leaves:{seed}:{k}" for k in range(count)]
         return (lambda k: src.scene(k, patch, patch)), names, f"{count} dead-leaves scenes (seed {seed})"
     folder = ImageFolder(images, split="val" if is_div2k(images) else "all", patch=patch, option=option,
-                         cache=0)
+                         cache=0, engine=engine)
     n = min(count, len(folder))
     names = [str(p.relative_to(folder.root)) for p in folder.files[:n]]
     return (lambda k: center_crop(folder.load(k), patch)), names, f"{n} images from {folder.root} ({folder.layout})"
@@ -112,6 +114,7 @@ def evaluate(
     images: str = "",
     progress: Callable[[int, int], None] | None = None,
     reuse_psfs: bool = True,
+    engine: Engine | None = None,
 ) -> Evaluation:
     """Score ``len(names)`` scenes (``scenes(k)``: ``[C, patch, patch]``) simulated through ``camera``.
 
@@ -149,17 +152,10 @@ def evaluate(
         t1 = time.perf_counter()
         tile = int(draws[k])
         region = grid.region(tile)
-        info = {"width": patch, "height": patch, "channels": img.shape[-1]}
-        plan, pilot, reg, sens = plan_scene(camera, info, region=region, effects=Effects(), options=options,
-                                            pilot=pilot)
+        plan, pilot, out = _capture(camera, img, region, options, pilot, cache, engine,
+                                    noise=(noise_sigma, int(seed) * 1_000_003 + k))
         if k == 0:
             notes += [n for n in plan.notes if n.startswith("channel weights")]
-        with torch.inference_mode():
-            sim = run_plan(camera, plan, pilot, reg, sens, img, options, cache=cache)
-            out = torch.from_numpy(np.ascontiguousarray(sim.image))
-            out = out.permute(2, 0, 1)
-            if noise_sigma > 0:
-                out = add_noise(out, noise_sigma, seed=int(seed) * 1_000_003 + k)
         t2 = time.perf_counter()
         if restore is not None:
             with torch.inference_mode():
@@ -180,13 +176,7 @@ def evaluate(
     if cache is not None and cache.hits + cache.misses:
         notes.append(f"PSF stacks: {cache.misses} computed, reused {cache.hits} times (tiles at the same distance "
                      "from the axis share their fields)")
-    ring_rows = []
-    for r in range(rings):
-        sel = [it for it in items if it.ring == r]
-        ring_rows.append({"ring": r, "radius_rel": [r / rings, (r + 1) / rings], "count": len(sel),
-                          "tiles": int((ring_idx == r).sum()),
-                          "psnr_db": float(np.mean([it.psnr_db for it in sel])) if sel else None,
-                          "ssim": float(np.mean([it.ssim for it in sel])) if sel else None})
+    ring_rows = _ring_rows(items, ring_idx, rings)
     return Evaluation(
         lens=camera.name, images=images, count=count, patch=patch, tiles=len(grid),
         sensor={"pixel_pitch_um": sensor.pitch_mm * 1e3, "resolution": [sensor.width, sensor.height],
@@ -195,3 +185,31 @@ def evaluate(
         space="sRGB-encoded [0, 1] (simulated in linear light)",
         psnr_db=float(np.mean([it.psnr_db for it in items])), ssim=float(np.mean([it.ssim for it in items])),
         rings=ring_rows, items=items, notes=notes, timings=timings)
+
+
+def _capture(camera: Camera, img: np.ndarray, region: Any, options: PlanOptions, pilot: Any, cache: Any,
+             engine: Engine | None, *, noise: tuple[float, int]) -> tuple[Any, Any, Tensor]:
+    """(plan, pilot, capture (C, H, W)) of the scene ``img`` (H, W, C) on the sensor ``region``: simulated
+    as ``lensopt simulate`` does, then the additive noise (σ, seed) ``noise``."""
+    info = {"width": img.shape[1], "height": img.shape[0], "channels": img.shape[-1]}
+    plan, pilot, reg, sens = plan_scene(camera, info, region=region, effects=Effects(), options=options,
+                                        pilot=pilot, engine=engine)
+    sigma, seed = noise
+    with torch.inference_mode():
+        sim = run_plan(camera, plan, pilot, reg, sens, img, options, cache=cache, engine=engine)
+        out = torch.from_numpy(np.ascontiguousarray(sim.image)).permute(2, 0, 1)
+        if sigma > 0:
+            out = add_noise(out, sigma, seed=seed)
+    return plan, pilot, out
+
+
+def _ring_rows(items: list[EvalItem], ring_idx: np.ndarray, rings: int) -> list[dict[str, Any]]:
+    """Mean PSNR and SSIM per ring of relative tile radius (None where no scene fell)."""
+    rows = []
+    for r in range(rings):
+        sel = [it for it in items if it.ring == r]
+        rows.append({"ring": r, "radius_rel": [r / rings, (r + 1) / rings], "count": len(sel),
+                     "tiles": int((ring_idx == r).sum()),
+                     "psnr_db": float(np.mean([it.psnr_db for it in sel])) if sel else None,
+                     "ssim": float(np.mean([it.ssim for it in sel])) if sel else None})
+    return rows

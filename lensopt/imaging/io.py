@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.files import atomic_path
-from lensopt.resources import require
 
 log = logging.getLogger("lensopt")
 
@@ -87,7 +87,8 @@ def _oiio():  # imported lazily: the PSF analysis does not need it
     return oiio
 
 
-def read_image(path: str | Path, *, option: str = "IMAGE") -> tuple[np.ndarray, ImageInfo]:
+def read_image(path: str | Path, *, option: str = "IMAGE",
+               engine: Engine | None = None) -> tuple[np.ndarray, ImageInfo]:
     """Read ``path`` as linear float32 (H, W, C) with C = 1 or 3 (alpha and extra channels dropped).
 
     The array is a view of a channel-planar (C, H, W) buffer (``arr.transpose(2, 0, 1)`` is contiguous).
@@ -101,7 +102,7 @@ def read_image(path: str | Path, *, option: str = "IMAGE") -> tuple[np.ndarray, 
         raise LensoptError(f"cannot read image: {oiio.geterror()}", path=option, got=str(path))
     try:
         spec = inp.spec()
-        check_image_size(spec.width, spec.height, option=option, path=path)
+        check_image_size(spec.width, spec.height, option=option, path=path, engine=engine)
         base = str(spec.format)
         native = base in _INT_BITS  # 8/16-bit: read as is, decode through a table
         data = inp.read_image(0, 0, 0, spec.nchannels, base if native else "float")
@@ -138,12 +139,13 @@ def read_image(path: str | Path, *, option: str = "IMAGE") -> tuple[np.ndarray, 
 SIM_BYTES_PER_PIXEL = 240
 
 
-def check_image_size(width: int, height: int, *, option: str = "IMAGE", path: str | Path = "") -> None:
-    """Refuse empty images and images too large for the memory budget, before reading pixels."""
+def check_image_size(width: int, height: int, *, option: str = "IMAGE", path: str | Path = "",
+                     engine: Engine | None = None) -> None:
+    """Refuse empty images and images too large for the engine's memory budget, before reading pixels."""
     if width < 1 or height < 1:
         raise LensoptError(f"image is {width}×{height} pixels", path=option, got=str(path))
-    require(width * height * SIM_BYTES_PER_PIXEL, f"simulating a {width}×{height} image",
-            lower="the image size (downscale or crop it)", path=option)
+    (engine or Engine()).require(width * height * SIM_BYTES_PER_PIXEL, f"simulating a {width}×{height} image",
+                                 lower="the image size (downscale or crop it)", path=option)
 
 
 def check_pixels(arr: np.ndarray, names: list[str], *, option: str = "IMAGE", path: str | Path = "") -> np.ndarray:

@@ -1,5 +1,6 @@
 """Image quality metrics: PSNR and SSIM (scikit-image's implementations, Wang et al. 2004 SSIM with
-its Gaussian-weighted variant as in the seed's comparisons), on images in [0, 1].
+its Gaussian-weighted variant as in the seed's comparisons), on images in [0, 1]; and the PSNR of a mean
+squared error (image objectives) and of a batch of tensors (the restoration network's validation).
 
 Both run in bands of rows, so that a 12-Mpixel RGB image costs a few float64 bands instead of a dozen
 float64 copies of the whole image (2.9 GB): SSIM's Gaussian window reaches ``SSIM_HALO`` rows, and
@@ -14,8 +15,10 @@ import math
 from collections.abc import Callable
 
 import numpy as np
+import torch
+from torch import Tensor
 
-__all__ = ["psnr", "ssim"]
+__all__ = ["psnr", "psnr_batch", "psnr_of_mse", "ssim"]
 
 #: Side of skimage's Gaussian SSIM window for σ = 1.5 (2·⌊3.5σ + 0.5⌋ + 1).
 SSIM_MIN_SIDE = 11
@@ -50,6 +53,18 @@ def psnr(reference: np.ndarray, test: np.ndarray, *, data_range: float = 1.0,
     if total == 0.0:  # equal after the transform (e.g. both clipped)
         return float("inf")
     return float(10.0 * math.log10(data_range**2 / (total / ref.size)))
+
+
+def psnr_of_mse(mse: float, peak: float = 1.0) -> float:
+    """PSNR in dB of a mean squared error for signals of peak ``peak``: 10 log10(peak² / MSE), ∞ for 0."""
+    return 10.0 * math.log10(peak**2 / mse) if mse > 0 else math.inf
+
+
+def psnr_batch(reference: Tensor, test: Tensor) -> Tensor:
+    """(B,) PSNR in dB of each image of ``test`` (B, ...), clamped to [0, 1], against ``reference`` (data
+    range 1), in the tensors' dtype (the MSE clamped at 1e-20)."""
+    mse = ((test.clamp(0, 1) - reference) ** 2).flatten(1).mean(1)
+    return 10 * torch.log10(1.0 / mse.clamp_min(1e-20))
 
 
 def ssim(reference: np.ndarray, test: np.ndarray, *, data_range: float = 1.0,

@@ -11,6 +11,7 @@ import torch
 from lensopt.analysis.distortion import paraxial_heights
 from lensopt.analysis.illumination import relative_illumination_std
 from lensopt.analysis.spot import spot_stats
+from lensopt.engine import Engine
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import first_order
@@ -48,13 +49,14 @@ class Pilot:
 
 
 @torch.no_grad()
-def run_pilot(lens: Lens, system: System, weights: torch.Tensor, *, fields: int = 33, rings: int = 8) -> Pilot:
+def run_pilot(lens: Lens, system: System, weights: torch.Tensor, *, fields: int = 33, rings: int = 8,
+              engine: Engine | None = None) -> Pilot:
     """Trace ``rings`` pupil rings (half pupil, mirrored by symmetry) at ``fields`` relative fields in
     [0, 1] for the wavelengths of ``lens`` with spectral ``weights`` (W,)."""
     u = torch.linspace(0.0, 1.0, fields, dtype=lens.dtype, device=lens.device)
     pupil = pupil_rings(rings, jitter=False, dtype=lens.dtype, device=lens.device)
     fo = first_order(lens, system)
-    b = trace_bundle(lens, system, pupil, half_pupil=True, rel_field=u, fo=fo)
+    b = trace_bundle(lens, system, pupil, half_pupil=True, rel_field=u, fo=fo, engine=engine)
     stats = spot_stats(b, weights)
     res = b.result
     valid = res.valid

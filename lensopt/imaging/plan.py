@@ -175,29 +175,11 @@ def make_plan(
     r1 = 1.22 * lam_max_mm * abs(wn)
     geo = pilot.at("rms", u_chk)
     forced = effects.forced
-
-    # Diffraction: the Airy radius against a pixel and against the geometric blur.
-    if "diffraction" in forced:
-        diff_on, diff_reason = forced["diffraction"], "forced by --effects"
-    elif r1 < 0.5 * px:
-        diff_on, diff_reason = False, f"Airy radius {r1 * 1e3:.2f} µm < half a pixel ({px * 1e3:.2f} µm)"
-    elif float(geo.min()) > 4.0 * r1:
-        diff_on, diff_reason = False, (f"geometric RMS blur ≥ {geo.min() * 1e3:.1f} µm everywhere in the region, "
-                                       f"> 4 × Airy radius {r1 * 1e3:.2f} µm")
-    else:
-        diff_on, diff_reason = True, (f"Airy radius {r1 * 1e3:.2f} µm = {r1 / px:.2f} px, geometric RMS blur "
-                                      f"down to {geo.min() * 1e3:.2f} µm")
+    diff_on, diff_reason = _diffraction_decision(forced, r1, px, geo)
     airy_rms = 0.6 * lam_max_mm * abs(wn) if diff_on else 0.0
     blur = np.sqrt(geo**2 + airy_rms**2) / px  # RMS blur, image pixels
     blur_max = float(blur.max())
-
-    if "convolution" in forced:
-        conv_on, conv_reason = forced["convolution"], "forced by --effects"
-    elif blur_max < options.passthrough_px:
-        conv_on, conv_reason = False, (f"pass-through: the PSF stays within a pixel (largest RMS blur "
-                                       f"{blur_max:.3f} px < {options.passthrough_px} px)")
-    else:
-        conv_on, conv_reason = True, f"RMS blur up to {blur_max:.2f} px"
+    conv_on, conv_reason = _convolution_decision(forced, blur_max, options.passthrough_px)
 
     grid, fields_u = None, np.array([])
     if conv_on:
@@ -247,6 +229,31 @@ def make_plan(
         blur_px={"max_rms": blur_max, "min_rms": float(blur.min())},
         notes=notes,
     )
+
+
+def _diffraction_decision(forced: dict[str, bool], r1: float, px: float, geo: np.ndarray) -> tuple[bool, str]:
+    """Whether to apply diffraction, and why: the Airy radius ``r1`` (mm) against a pixel ``px`` (mm) and
+    against the geometric RMS blur ``geo`` (mm) in the region (unless ``--effects`` forces it)."""
+    if "diffraction" in forced:
+        return forced["diffraction"], "forced by --effects"
+    if r1 < 0.5 * px:
+        return False, f"Airy radius {r1 * 1e3:.2f} µm < half a pixel ({px * 1e3:.2f} µm)"
+    if float(geo.min()) > 4.0 * r1:
+        return False, (f"geometric RMS blur ≥ {geo.min() * 1e3:.1f} µm everywhere in the region, "
+                       f"> 4 × Airy radius {r1 * 1e3:.2f} µm")
+    return True, (f"Airy radius {r1 * 1e3:.2f} µm = {r1 / px:.2f} px, geometric RMS blur "
+                  f"down to {geo.min() * 1e3:.2f} µm")
+
+
+def _convolution_decision(forced: dict[str, bool], blur_max: float, passthrough_px: float) -> tuple[bool, str]:
+    """Whether to convolve at all, and why: the largest RMS blur (image pixels) against the pass-through
+    limit (unless ``--effects`` forces it)."""
+    if "convolution" in forced:
+        return forced["convolution"], "forced by --effects"
+    if blur_max < passthrough_px:
+        return False, (f"pass-through: the PSF stays within a pixel (largest RMS blur "
+                       f"{blur_max:.3f} px < {passthrough_px} px)")
+    return True, f"RMS blur up to {blur_max:.2f} px"
 
 
 def _optional(forced: dict[str, bool], name: str, what: str) -> dict[str, Any]:

@@ -25,6 +25,7 @@ from torch import Tensor
 
 from lensopt.analysis.psf import KERNELS, deposit, mirror_half_pupil
 from lensopt.analysis.psf_diffraction import airy_field, diffraction_heuristic
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.imaging.convolve import overlap_add_convolve
 from lensopt.imaging.effects import add_noise
@@ -97,7 +98,7 @@ class Spots:
 
 
 def trace_spots(lens: Lens, system: System, rel_field: Tensor, pupil: Tensor, *, half: bool,
-                fo: FirstOrder | None = None) -> Spots:
+                fo: FirstOrder | None = None, engine: Engine | None = None) -> Spots:
     """Spot diagrams of ``lens`` at relative fields ``rel_field`` (F,) for every wavelength of the lens,
     differentiable in the lens tensors (forward and reverse mode).
 
@@ -106,7 +107,8 @@ def trace_spots(lens: Lens, system: System, rel_field: Tensor, pupil: Tensor, *,
             random draw); half: they cover the half pupil x ≥ 0.
     """
     fo = first_order(lens, system) if fo is None else fo
-    bundle = trace_bundle(lens, system, pupil.to(lens.dtype), half_pupil=half, rel_field=rel_field, fo=fo)
+    bundle = trace_bundle(lens, system, pupil.to(lens.dtype), half_pupil=half, rel_field=rel_field, fo=fo,
+                          engine=engine)
     res = bundle.result
     return Spots(res.pos[..., :2], res.valid, bundle.half_pupil, rel_field, system.wavelength_weights,
                  float(fo.working_fnumber.detach()))
@@ -196,10 +198,10 @@ def render_batch(psf: Tensor, center: Tensor, images: Tensor, regions: Sequence[
 
 def render_lens(lens: Lens, system: System, rel_field: Tensor, sampling: PupilSampling, images: Tensor,
                 regions: Sequence[Region], sensor: Sensor, channel_weights: Tensor, settings: RenderSettings,
-                *, noise: bool = True) -> Tensor:
+                *, noise: bool = True, engine: Engine | None = None) -> Tensor:
     """Trace, PSFs and rendering in one differentiable call (reverse mode through all of it)."""
-    spots = trace_spots(lens, system, rel_field, sampling.points(dtype=lens.dtype, device=lens.device),
-                        half=sampling.half)
+    spots = trace_spots(lens, system, rel_field, sampling.points(dtype=lens.dtype, device=lens.device, engine=engine),
+                        half=sampling.half, engine=engine)
     airy = None
     if settings.diffraction:
         airy = airy_for(spots, lens.wavelength_um, sensor.pitch_mm, float(lens.index[-1, 0].detach()))

@@ -14,6 +14,7 @@ import numpy as np
 import torch
 
 from lensopt.analysis.psf_stack import PsfSettings, PsfStack, compute_psfs, select_wavelengths
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.imaging.camera import Camera, ProvidesCamera, as_camera
 from lensopt.imaging.convolve import overlap_add_convolve
@@ -84,6 +85,7 @@ def sensor_of(camera: Camera | ProvidesCamera, image_w: int, image_h: int) -> tu
 def plan_scene(
     camera: Camera | ProvidesCamera, image_info: dict[str, Any], *, region: str | Region | None,
     effects: Effects, options: PlanOptions, timings: dict[str, float] | None = None, pilot: Pilot | None = None,
+               engine: Engine | None = None,
 ) -> tuple[ScenePlan, Pilot, Region, Sensor]:
     """Make the plan (runs only the cheap pilot trace, or reuses ``pilot`` from an earlier plan of the
     same camera). ``region``: ``--region`` text or a ``Region`` (e.g. ``TileGrid.region(k)``)."""
@@ -94,7 +96,7 @@ def plan_scene(
                                                                  image_info["height"])
     if pilot is None:
         with _timed(timings, "pilot trace"):
-            pilot = run_pilot(camera.lens, camera.system, camera.system.wavelength_weights)
+            pilot = run_pilot(camera.lens, camera.system, camera.system.wavelength_weights, engine=engine)
     plan = make_plan(lens_name=camera.name, spectrum=camera.spectrum, sensor=sensor, region=reg,
                      image=image_info, pilot=pilot, effects=effects, options=options, notes=notes)
     return plan, pilot, reg, sensor
@@ -102,7 +104,7 @@ def plan_scene(
 
 def run_plan(camera: Camera | ProvidesCamera, plan: ScenePlan, pilot: Pilot, region: Region, sensor: Sensor,
              image: np.ndarray, options: PlanOptions, timings: dict[str, float] | None = None,
-             cache: PsfCache | None = None) -> SimulationResult:
+             cache: PsfCache | None = None, *, engine: Engine | None = None) -> SimulationResult:
     """Simulate ``image`` (H, W, C linear float32) as planned, on the device of the camera's lens (the
     result comes back as a NumPy array). ``cache``: reuse PSF stacks and grids of earlier scenes of the
     same camera (``PsfCache``; same images)."""
@@ -137,7 +139,7 @@ def run_plan(camera: Camera | ProvidesCamera, plan: ScenePlan, pilot: Pilot, reg
             with _timed(timings, "trace + PSFs"), torch.no_grad():
                 rel = torch.tensor(plan.fields_relative, dtype=lens.dtype, device=device)
                 fo = first_order(camera.lens, camera.system)
-                stack = compute_psfs(lens, system, rel, settings, fo=fo)
+                stack = compute_psfs(lens, system, rel, settings, fo=fo, engine=engine)
         if grid is None:
             with _timed(timings, "PSF grid"), torch.no_grad():
                 radius = np.abs(stack.center[:, 1].cpu().numpy())

@@ -11,10 +11,10 @@
     aiming.py      ray aiming (chief, full); its detached solves can be handed back (ChiefSolve, FullSolve)
     vignetting.py  vignetting factors: the pupil per field and wavelength
     trace.py       the eager sequential trace (one step function per surface), RayTrace, failure reasons
-    differential.py  the trace's derivatives surface by surface (local derivatives chained): the LM Jacobian
+    bundle.py      trace a system: aiming + vignetting (launch_bundle) + trace (finish_bundle), on the
+                   ``Engine``'s backend
     transforms.py  what the core may do under torch transforms: stop solves early, skip derivative-only work
-    bundle.py      trace a system: aiming + vignetting (launch_bundle) + trace (finish_bundle)
-    backend.py     which trace runs (eager | torch.compile | AOT package)
-    compiled.py    the torch.compile kernel
-    aot.py         AOT-compiled trace packages on disk
+    differential.py  the trace's derivatives surface by surface (local derivatives chained): the LM Jacobian
+
+The compiled traces (torch.compile, AOT packages) and the choice between them are ``lensopt.accel``.
 """

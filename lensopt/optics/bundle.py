@@ -22,12 +22,13 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from lensopt.engine import BYTES_PER_RAY_SURFACE, Engine
 from lensopt.optics.aiming import ChiefAim, PupilAim, aim_chief, aim_full
-from lensopt.optics.backend import trace_with
+from lensopt.optics.intersect import NEWTON_ITERATIONS
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import FirstOrder, field_tangents, first_order
 from lensopt.optics.sampling import launch
-from lensopt.optics.trace import Rays, RayTrace, Status
+from lensopt.optics.trace import Rays, RayTrace, Status, trace
 from lensopt.optics.vignetting import (
     apply_vignetting,
     clip_ellipse_to_disc,
@@ -37,10 +38,9 @@ from lensopt.optics.vignetting import (
     front_aperture_disc,
     outside_front_aperture,
 )
-from lensopt.resources import BYTES_PER_RAY_SURFACE, require
 
 __all__ = ["Bundle", "Launch", "PupilShape", "pupil_shape", "trace_bundle", "launch_bundle", "finish_bundle",
-           "AIM_MODES"]
+           "trace_rays", "AIM_MODES"]
 
 AIM_MODES = ("none", "chief", "full")
 
@@ -161,7 +161,7 @@ def trace_bundle(
     aim_steps: int | None = None,
     shape: PupilShape | None = None,
     rel_field_x: Tensor | None = None,
-    backend: str | None = None,
+    engine: Engine | None = None,
     solved: PupilShape | None = None,
     pupil_weights: Tensor | None = None,
 ) -> Bundle:
@@ -180,7 +180,7 @@ def trace_bundle(
             again when several bundles share fields); ``aim``/``vignetting`` are then not used.
         rel_field_x: (F,) relative fields in x (two-dimensional fields, for lenses that are not
             rotationally symmetric), scaled like ``rel_field``; needs ``aim`` ``none`` or ``chief``.
-        backend: ``auto``, ``eager`` or ``compiled`` (``optics.backend``); default: ``use_backend``'s.
+        engine: the trace backend (``accel.dispatch``) and memory budget; default ``Engine()`` (eager).
         solved: the pupil shape of an earlier bundle on the same lens values and fields
             (``Bundle.shape``), whose detached aiming solves are reused (``pupil_shape``).
         pupil_weights: (P,) pupil-area weights of the samples (``PupilSampling.weights``); None: equal.
@@ -193,8 +193,17 @@ def trace_bundle(
     """
     start = launch_bundle(lens, system, pupil, half_pupil=half_pupil, rel_field=rel_field, aim=aim, fo=fo,
                           vignetting=vignetting, aim_steps=aim_steps, shape=shape, rel_field_x=rel_field_x,
-                          solved=solved, pupil_weights=pupil_weights)
-    return finish_bundle(system, start, trace_with(lens, start.rays, record=record, backend=backend))
+                          solved=solved, pupil_weights=pupil_weights, engine=engine)
+    return finish_bundle(system, start, trace_rays(lens, start.rays, record=record, engine=engine))
+
+
+def trace_rays(lens: Lens, rays: Rays, *, engine: Engine | None = None, upto: int | None = None,
+               record: bool = False, newton_iterations: int = NEWTON_ITERATIONS) -> RayTrace:
+    """``trace(lens, rays, ...)`` on the engine's backend: its ``tracer`` (``accel.dispatch.trace_with``)
+    when it has one, else the eager trace."""
+    if engine is not None and engine.tracer is not None:
+        return engine.tracer(lens, rays, engine=engine, upto=upto, record=record, newton_iterations=newton_iterations)
+    return trace(lens, rays, upto=upto, record=record, newton_iterations=newton_iterations)
 
 
 @dataclass(frozen=True)
@@ -230,8 +239,10 @@ def launch_bundle(
     rel_field_x: Tensor | None = None,
     solved: PupilShape | None = None,
     pupil_weights: Tensor | None = None,
+    engine: Engine | None = None,
 ) -> Launch:
-    """The first half of ``trace_bundle`` (same arguments): first-order data, pupil shape, launched rays."""
+    """The first half of ``trace_bundle`` (same arguments): first-order data, pupil shape, launched rays;
+    refused (``LensoptError``) when the bundle would not fit the engine's memory budget."""
     fo = first_order(lens, system) if fo is None else fo
     if rel_field is None:
         rel_field = torch.tensor(system.rel_field, dtype=lens.dtype, device=lens.device)
@@ -255,8 +266,8 @@ def launch_bundle(
     if pupil.dim() == 2:
         pupil = pupil.expand(rel_field.shape[0], lens.wavelength_um.shape[0], *pupil.shape)
     rays_n = pupil.numel() // 2
-    require(rays_n * (len(lens.shapes) + 2) * BYTES_PER_RAY_SURFACE, f"tracing {rays_n:,} rays",
-            lower="the pupil sampling (rings:N / grid:N) or the number of fields and wavelengths")
+    (engine or Engine()).require(rays_n * (len(lens.shapes) + 2) * BYTES_PER_RAY_SURFACE, f"tracing {rays_n:,} rays",
+                                 lower="the pupil sampling (rings:N / grid:N) or the number of fields and wavelengths")
     if vignetting is None and system.vignetting and len(system.vignetting) == rel_field.shape[0]:
         vignetting = torch.tensor(system.vignetting, dtype=lens.dtype, device=lens.device).unsqueeze(1)
     if shape is None:

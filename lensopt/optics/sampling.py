@@ -31,10 +31,10 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from lensopt.engine import Engine
 from lensopt.errors import SpecError
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.trace import Rays
-from lensopt.resources import require
 
 __all__ = ["PupilSampling", "DEFAULT_REPORT_SAMPLING", "pupil_rings", "pupil_grid", "pupil_gauss", "fan", "launch"]
 
@@ -78,10 +78,10 @@ class PupilSampling:
         """Rays per field and wavelength (``grid``: before clipping to the disc, an upper bound)."""
         return 2 * self.n**2 if self.kind == "gauss" else self.n**2
 
-    def points(self, *, dtype: torch.dtype, device: torch.device | None = None) -> Tensor:
-        """(P, 2) relative pupil coordinates."""
-        require(64 * self.count, f"{self} pupil sampling ({self.count:,} points)",
-                lower="N of rings:N / grid:N / gauss:N")
+    def points(self, *, dtype: torch.dtype, device: torch.device | None = None, engine: Engine | None = None) -> Tensor:
+        """(P, 2) relative pupil coordinates; refused (``LensoptError``) beyond the engine's memory budget."""
+        (engine or Engine()).require(64 * self.count, f"{self} pupil sampling ({self.count:,} points)",
+                                     lower="N of rings:N / grid:N / gauss:N")
         if self.kind == "rings":
             return pupil_rings(self.n, jitter=self.jitter, seed=self.seed, dtype=dtype, device=device)
         if self.kind == "gauss":

@@ -145,7 +145,7 @@ def trace(
 def trace_kernel(lens: Lens, rays: Rays, options: KernelOptions, *, upto: int | None = None, record: bool = False,
                  newton_iterations: int = NEWTON_ITERATIONS, ratio: Tensor | None = None) -> RayTrace:
     """``trace`` in the compiled kernel's formulation (``KernelOptions``): the function that
-    ``optics.compiled`` compiles; eager, it lets tests check the formulation without a compiler.
+    ``accel.compiled`` compiles; eager, it lets tests check the formulation without a compiler.
     Never chunked. ``ratio``: ``index_ratio(lens)``, computed by the caller (default: here); the
     compiled trace passes it in, so that the kernel loads 3 numbers per surface instead of redoing
     the table's divisions for every block of rays (Inductor inlines such scalar work in the loop)."""
@@ -431,7 +431,7 @@ def image_step(image_z: Tensor, frame: tuple[Tensor, Tensor] | None, ray: Ray6, 
 
 @dataclass(frozen=True)
 class KernelOptions:
-    """The formulation of the compiled trace's kernel (``optics.compiled``). It differs from the
+    """The formulation of the compiled trace's kernel (``accel.compiled``). It differs from the
     reference (eager) trace only in rounding, and only where that saves work per ray:
 
     - refraction from one per-wavelength table of n/n' (``interact.refract_ratio_xyz``);

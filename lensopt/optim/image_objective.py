@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -24,9 +23,11 @@ import torch
 from torch import Tensor
 
 from lensopt.analysis.psf_stack import select_wavelengths
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.imaging.camera import Camera
 from lensopt.imaging.datasets import DeadLeaves, ImageFolder, sample_batch
+from lensopt.imaging.metrics import psnr_of_mse
 from lensopt.imaging.plan import channel_weights
 from lensopt.imaging.regions import stratified_draw, tile_grid
 from lensopt.imaging.render import (
@@ -45,12 +46,7 @@ from lensopt.optics.sampling import PupilSampling
 from lensopt.optim.gtra import GtraTarget, gtra_residual, gtra_target, psf_window
 from lensopt.optim.settings import ImageSettings
 
-__all__ = ["ImageObjective", "psnr_db"]
-
-
-def psnr_db(mse_value: float, peak: float = 1.0) -> float:
-    """PSNR of a mean squared error for signals of peak ``peak``, dB."""
-    return 10.0 * math.log10(peak**2 / mse_value) if mse_value > 0 else math.inf
+__all__ = ["ImageObjective"]
 
 
 def _seed(*parts: object) -> int:
@@ -66,18 +62,20 @@ class ImageObjective:
         image: the rendering settings (``[optimize.image]``).
         mode: ``gtra`` (LM) or ``scalar`` (Adam).
         dtype: dtype of the image patches (float32 rendering; float64 for identity tests).
+        engine: trace backend and memory budget of the rendering rays (default ``Engine()``).
 
     Raises:
         LensoptError: no ``[sensor]`` (or no resolution), an unusable image folder, no RGB weights.
     """
 
     def __init__(self, camera: Camera, image: ImageSettings, *, mode: str = "gtra",
-                 dtype: torch.dtype = torch.float32) -> None:
+                 dtype: torch.dtype = torch.float32, engine: Engine | None = None) -> None:
         if camera.pixel_pitch_um is None:
             raise LensoptError('objective = "raw" needs a [sensor] (pixel_pitch_um and resolution)', path="sensor")
         if camera.resolution is None:
             raise LensoptError('objective = "raw" needs the sensor resolution', path="sensor.resolution")
         self.spec = image
+        self.engine = engine or Engine()
         self.mode = mode
         self.dtype = dtype
         self.system = camera.system
@@ -88,7 +86,7 @@ class ImageObjective:
                                        seed=image.seed)
         self.rel_field = torch.linspace(0.0, 1.0, image.fields, dtype=torch.float64)
         sampling = PupilSampling.parse(image.sampling, seed=image.seed, path="optimize.image.sampling")
-        self.pupil, self.half = sampling.points(dtype=torch.float64), sampling.half
+        self.pupil, self.half = sampling.points(dtype=torch.float64, engine=self.engine), sampling.half
         wl = list(camera.spectrum.wavelengths_nm)
         cw, _, self.rgb_note = channel_weights(camera.spectrum, 3, wl)
         cw = torch.as_tensor(np.asarray(cw), dtype=torch.float64)
@@ -135,7 +133,8 @@ class ImageObjective:
         sub, system = lens, self.system
         if len(self.keep) < lens.wavelength_um.shape[0]:
             sub, system = select_wavelengths(lens, self.system, self.keep)
-        return trace_spots(sub, system, self.rel_field.to(lens.dtype), self.pupil, half=self.half, fo=fo)
+        return trace_spots(sub, system, self.rel_field.to(lens.dtype), self.pupil, half=self.half, fo=fo,
+                           engine=self.engine)
 
     def _airy(self, spots: Spots, lens: Lens) -> Tensor | None:
         if not self.settings.diffraction:
@@ -199,7 +198,7 @@ class ImageObjective:
                 sl = slice(k, k + self.spec.batch)
                 out = self.render(spots.xy, spots, airy, images[sl], regions[sl]).clamp(0.0, 1.0)
                 total += float(((out - images[sl]) ** 2).mean((1, 2, 3)).sum())
-        return psnr_db(total / n)
+        return psnr_of_mse(total / n)
 
 
 def _centroid(spots: Spots) -> Tensor:

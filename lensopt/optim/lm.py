@@ -56,41 +56,29 @@ class StepInfo:
     reason: str
 
 
-_THREADS: list[int] = []
-
-
 @contextlib.contextmanager
-def one_thread() -> Iterator[None]:
-    """Run the reductions and the least-squares solve that decide the optimizer's path on one thread.
+def threads(n: int) -> Iterator[int]:
+    """Run the block on ``n`` intra-op threads (``torch.set_num_threads``); yields the caller's count and
+    restores it after."""
+    old = torch.get_num_threads()
+    if n != old:
+        torch.set_num_threads(n)
+    try:
+        yield old
+    finally:
+        if n != old:
+            torch.set_num_threads(old)
+
+
+def one_thread() -> contextlib.AbstractContextManager[int]:
+    """Run the reductions and the least-squares solve that decide the optimizer's path on one thread;
+    yields the caller's thread count (the residual evaluations inside run on it again: ``threads``).
 
     Multi-threaded BLAS/LAPACK and torch's parallel reductions split sums by thread count, so the same
     problem took different paths with 1 and 2 threads (README, "Determinism"). These are small
     (M × N with N variables), so one thread costs little; the residual evaluations keep all threads.
     """
-    n = torch.get_num_threads()
-    _THREADS.append(n)
-    if n != 1:
-        torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        _THREADS.pop()
-        if n != 1:
-            torch.set_num_threads(n)
-
-
-@contextlib.contextmanager
-def all_threads() -> Iterator[None]:
-    """Inside ``one_thread``: the caller's thread count again (for the residual evaluations)."""
-    n = _THREADS[-1] if _THREADS else torch.get_num_threads()
-    if n == torch.get_num_threads():
-        yield
-        return
-    torch.set_num_threads(n)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(1)
+    return threads(1)
 
 
 def damped_step(J: Tensor, r: Tensor, D: Tensor, damping: float) -> Tensor:
@@ -171,10 +159,10 @@ class LevenbergMarquardt:
     def step(self, scale: Tensor) -> StepInfo:
         """One iteration with row multipliers ``scale`` (M,) (1 everywhere for a fixed merit)."""
         self._ensure_jacobian(scale)
-        with one_thread():
-            return self._step(scale)
+        with one_thread() as caller:
+            return self._step(scale, caller)
 
-    def _step(self, scale: Tensor) -> StepInfo:
+    def _step(self, scale: Tensor, caller_threads: int) -> StepInfo:
         s = self.settings
         J, r = scale[:, None] * self._J, scale * self._r
         if not bool(torch.isfinite(r).all()):
@@ -188,7 +176,7 @@ class LevenbergMarquardt:
         delta = damped_step(J, r, self.D, self.damping)
         if not bool(torch.isfinite(delta).all()):
             return self._reject(merit, "non-finite step")
-        with all_threads():
+        with threads(caller_threads):
             trial = self._evaluate(self.theta + delta)
         if not trial.physical:
             return self._reject(merit, trial.reason)

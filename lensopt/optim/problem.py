@@ -21,6 +21,7 @@ from torch import Tensor
 
 from lensopt.analysis.spot import spot_stats
 from lensopt.analysis.wavefront import map_grid
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError, SpecError
 from lensopt.imaging.camera import Camera
 from lensopt.materials import Material, design_catalog
@@ -115,11 +116,13 @@ class Problem:
         method: ``lm`` or ``adam`` (default: the settings' optimizer): image objectives use GTRA for LM,
             the scalar loss for Adam.
         image_dtype: dtype of the rendered image patches.
+        engine: trace backend and memory budget of its traces (``lensopt.engine``; default ``Engine()``).
     """
 
     def __init__(self, setup: ProblemSetup, *, seed: int = 0, method: str | None = None,
-                 image_dtype: torch.dtype = torch.float32) -> None:
+                 image_dtype: torch.dtype = torch.float32, engine: Engine | None = None) -> None:
         self.setup = setup
+        self.engine = engine or Engine()
         self.opt: OptimizeSettings = setup.settings
         self.objective: str = self.opt.objective or "spot"
         self.image: ImageObjective | None = None
@@ -151,8 +154,8 @@ class Problem:
         if self.space is not None and cons.glass_mesh is not None:
             self.mesh = glass_mesh(self.space, cons.glass_mesh.max_edge)
         self.sampling = PupilSampling.parse(self.opt.sampling, seed=seed, path="optimize.sampling")
-        self.num_spot = self.sampling.points(dtype=dtype).shape[0]
-        self.pupil = with_rim(self.sampling.points(dtype=dtype), self.opt.rim_rays,
+        self.num_spot = self.sampling.points(dtype=dtype, engine=self.engine).shape[0]
+        self.pupil = with_rim(self.sampling.points(dtype=dtype, engine=self.engine), self.opt.rim_rays,
                               half=self.sampling.half).to(self.device)
         fw = self.system.field_weights or (1.0,) * self.system.num_fields
         self.field_weights = torch.tensor(fw, dtype=dtype, device=self.device)
@@ -166,13 +169,13 @@ class Problem:
         self.failure_penalty = cons.ray_failure.penalty_mm or alpha
         self.path_spans = self._path_spans()
         self.theta0 = self.param.initial()
-        if self.objective in ("raw", "restored"):  # "restored": optim.joint replaces it with RestoredObjective
+        if self.objective in ("raw", "restored"):  # "restored": design.joint replaces it with RestoredObjective
             if setup.camera is None:
                 raise LensoptError('objective = "raw" needs a [sensor] (pixel_pitch_um and resolution)',
                                    path="sensor")
             mode = "scalar" if (method or self.opt.optimizer) == "adam" else "gtra"
             self.image = ImageObjective(setup.camera, self.opt.image or ImageSettings(), mode=mode,
-                                        dtype=image_dtype)
+                                        dtype=image_dtype, engine=self.engine)
         self._shape_memo: tuple[Tensor, PupilShape] | None = None
         wf_pupil = None
         if self.opt.wavefront is not None:
@@ -186,7 +189,7 @@ class Problem:
         self.size = max((sl.stop for sl in self.slices.values()), default=0)
 
     def use_image(self, image: ImageObjective | Any) -> None:
-        """Make ``image`` the image objective (``optim.joint`` puts its ``RestoredObjective`` here)."""
+        """Make ``image`` the image objective (``design.joint`` puts its ``RestoredObjective`` here)."""
         self.image = image
         self.term_setup = dataclasses.replace(self.term_setup, image=image)
 
@@ -223,14 +226,14 @@ class Problem:
         """The optimization rays of ``lens`` traced (``record``); with ``theta`` (the variables ``lens``
         was made from) the detached aiming solves are taken from, or kept for, that θ (``solved``)."""
         bundle = trace_bundle(lens, self.system, self.pupil, half_pupil=self.sampling.half, record=True,
-                              solved=self.solved_shape(theta))
+                              solved=self.solved_shape(theta), engine=self.engine)
         self._remember(theta, bundle.shape)
         return bundle
 
     def launch(self, lens: Lens, theta: Tensor | None = None) -> Launch:
         """The optimization rays of ``bundle`` before their trace (``optim.jacobian``'s stage A)."""
         return launch_bundle(lens, self.system, self.pupil, half_pupil=self.sampling.half,
-                             solved=self.solved_shape(theta))
+                             solved=self.solved_shape(theta), engine=self.engine)
 
     def solved_shape(self, theta: Tensor | None) -> PupilShape | None:
         """The pupil shape last computed at exactly this θ (its detached aiming solves are a function of

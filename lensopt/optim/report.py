@@ -49,10 +49,10 @@ def constraint_report(problem: Problem, theta: torch.Tensor, sampling: PupilSamp
         if sampling is None:
             bundle, n_spot = problem.bundle(lens), problem.num_spot
         else:
-            pts = sampling.points(dtype=lens.dtype)
+            pts = sampling.points(dtype=lens.dtype, engine=problem.engine)
             n_spot = pts.shape[0]
             bundle = trace_bundle(lens, problem.system, with_rim(pts, problem.opt.rim_rays, half=sampling.half),
-                                  half_pupil=sampling.half, record=True)
+                                  half_pupil=sampling.half, record=True, engine=problem.engine)
         valid = bundle.result.valid
         spot = head(bundle, n_spot)
         if sampling is not None and sampling.weights(dtype=lens.dtype) is not None:  # a quadrature (gauss:N)

@@ -3,7 +3,8 @@
 Every knob that trades accuracy for time is swept alone, the others at their defaults, and each
 setting is scored by the error of what the user asked for against a converged reference, and by its
 wall time (median of ``repeats`` runs, compilation excluded and reported apart; every knob but ``compiled``
-traces eagerly, so that no backend switch lands inside a knob's timing):
+traces eagerly, on an engine without the compiled traces, so that no compilation lands inside a knob's
+timing):
 
 ============  ==========================================  =============================================
 knob          settings                                    error (against)
@@ -48,8 +49,9 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from lensopt.accel import on_backend
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
-from lensopt.optics.backend import use_backend
 from lensopt.optics.bundle import Bundle, trace_bundle
 from lensopt.optics.sampling import PupilSampling
 from lensopt.qa.accuracy_analyses import analysis_points
@@ -170,17 +172,18 @@ def _field_weights(model: Model) -> Tensor | None:
 
 
 def spot_reference(model: Model, *, aim: str | None = None, aim_steps: int | None = None, start: int = 16,
-                   cap: int = 256) -> dict[str, Any]:
+                   cap: int = 256, engine: Engine | None = None) -> dict[str, Any]:
     """ESR and RMS per field by the doubling quadrature (see the module doc); {esr_um, rms_um, nodes,
     agreement (relative change of the ESR at the last doubling), converged}."""
     lens, system = model.lens, model.system
     fw = _field_weights(model)
     prev = None
     n = start
-    with torch.no_grad(), use_backend("eager"):
+    with torch.no_grad():
         while True:
             pts, wts = _quadrature(n, 2 * n)
-            b = trace_bundle(lens, system, pts.to(lens.dtype), half_pupil=True, aim=aim, aim_steps=aim_steps)
+            b = trace_bundle(lens, system, pts.to(lens.dtype), half_pupil=True, aim=aim, aim_steps=aim_steps,
+                             engine=engine)
             esr, rms = weighted_spot(b, wts, system.wavelength_weights, fw)
             if prev is not None:
                 agree = abs(float(esr) - prev[0]) / abs(float(esr))
@@ -193,7 +196,8 @@ def spot_reference(model: Model, *, aim: str | None = None, aim_steps: int | Non
             n *= 2
 
 
-def _spot_points(model: Model, knob: str, ref: dict[str, Any], repeats: int) -> list[Point]:
+def _spot_points(model: Model, knob: str, ref: dict[str, Any], repeats: int, *,
+                 engine: Engine | None = None) -> list[Point]:
     lens, system = model.lens, model.system
     fw = _field_weights(model)
     ref_esr, ref_rms = ref["esr_um"] * 1e-3, np.array(ref["rms_um"]) * 1e-3
@@ -206,14 +210,15 @@ def _spot_points(model: Model, knob: str, ref: dict[str, Any], repeats: int) -> 
     if knob == "float32":
         work = _cast(lens, torch.float32)
     backend = "compiled" if knob == "compiled" else "eager"
+    eng = on_backend(engine, "compiled") if backend == "compiled" else engine
     for text in samplings:
         ps = PupilSampling.parse(text, weighted=True)
 
         def run(ps: PupilSampling = ps) -> tuple[Tensor, Tensor]:
-            with torch.no_grad(), use_backend(backend):
-                pts = ps.points(dtype=work.dtype)
+            with torch.no_grad():
+                pts = ps.points(dtype=work.dtype, engine=eng)
                 wts = ps.weights(dtype=work.dtype)
-                b = trace_bundle(work, system, pts, half_pupil=ps.half)
+                b = trace_bundle(work, system, pts, half_pupil=ps.half, engine=eng)
                 return weighted_spot(b, torch.ones(pts.shape[0], dtype=work.dtype) if wts is None else wts,
                                      system.wavelength_weights.to(work.dtype), fw)
 
@@ -235,10 +240,10 @@ def _cast(lens: Any, dtype: torch.dtype) -> Any:
                                         and getattr(lens, f.name).is_floating_point()})
 
 
-def _aim_points(model: Model, repeats: int) -> tuple[list[Point], dict[str, Any]]:
+def _aim_points(model: Model, repeats: int, *, engine: Engine | None = None) -> tuple[list[Point], dict[str, Any]]:
     """Full aiming with 1–4 Newton steps, traced on the reference quadrature (so that only the aiming
     error shows), against full aiming with 12 steps on the same nodes."""
-    ref = spot_reference(model, aim="full", aim_steps=12)
+    ref = spot_reference(model, aim="full", aim_steps=12, engine=engine)
     n = int(ref["nodes"].split()[1])
     pts, wts = _quadrature(n, 2 * n)
     pts = pts.to(model.lens.dtype)
@@ -246,8 +251,9 @@ def _aim_points(model: Model, repeats: int) -> tuple[list[Point], dict[str, Any]
     out = []
     for steps in (1, 2, 3, 4):
         def run(steps: int = steps) -> Tensor:
-            with torch.no_grad(), use_backend("eager"):
-                b = trace_bundle(model.lens, model.system, pts, half_pupil=True, aim="full", aim_steps=steps)
+            with torch.no_grad():
+                b = trace_bundle(model.lens, model.system, pts, half_pupil=True, aim="full", aim_steps=steps,
+                                 engine=engine)
                 return weighted_spot(b, wts, model.system.wavelength_weights, fw)[0]
         esr, t = timed(run, repeats)
         out.append(Point("aim_steps", f"aim full, {steps} step(s)",
@@ -260,7 +266,7 @@ def _aim_points(model: Model, repeats: int) -> tuple[list[Point], dict[str, Any]
 
 
 def _psf_points(model: Model, knobs: Sequence[str], repeats: int, pitch_um: float,
-                progress: Callable[[str], None]) -> tuple[list[Point], dict[str, Any]]:
+                progress: Callable[[str], None], *, engine: Engine | None = None) -> tuple[list[Point], dict[str, Any]]:
     from lensopt.analysis.psf_reference import diffraction_psf, pupil_samples_for
     from lensopt.analysis.psf_stack import PsfSettings, compute_psfs
     from lensopt.optics.paraxial import first_order
@@ -271,17 +277,19 @@ def _psf_points(model: Model, knobs: Sequence[str], repeats: int, pitch_um: floa
     base = PsfSettings(sampling="rings:32", pitch_mm=pitch, diffraction="heuristic")
     # Every PSF here is traced eagerly (the ``compiled`` knob measures the backend): under ``auto`` the
     # rays of the FFT reference would otherwise trigger an in-process compilation inside some knob's timing.
-    with torch.no_grad(), use_backend("eager"):
-        size = compute_psfs(lens, system, rel, base).psf.shape[-1]
+    with torch.no_grad():
+        size = compute_psfs(lens, system, rel, base, engine=engine).psf.shape[-1]
         size = max(size | 1, 31)
-        center = compute_psfs(lens, system, rel, PsfSettings(sampling="rings:64", pitch_mm=pitch, size=size)).center
+        center = compute_psfs(lens, system, rel, PsfSettings(sampling="rings:64", pitch_mm=pitch, size=size),
+                              engine=engine).center
         progress("FFT reference PSF")
         t0 = time.perf_counter()
         # One field at a time: the OPD trace of every pupil sample × wavelength of all fields at once can
         # exceed the memory budget (12 wavelengths × 5 fields of the C-mount lens: 9 M recorded rays).
         def fft(n: int | None) -> Tensor:
             return torch.cat([diffraction_psf(lens, system, rel[f:f + 1], center[f:f + 1], pitch_mm=pitch, size=size,
-                                              subsamples=3, pupil_samples=n) for f in range(rel.shape[0])])
+                                              subsamples=3, pupil_samples=n,
+                                              engine=engine) for f in range(rel.shape[0])])
 
         ref = fft(None)
         t_ref = time.perf_counter() - t0
@@ -309,8 +317,8 @@ def _psf_points(model: Model, knobs: Sequence[str], repeats: int, pitch_um: floa
             s = PsfSettings(**{**base.__dict__, "size": size, **kw})
 
             def run(s: PsfSettings = s) -> Tensor:
-                with torch.no_grad(), use_backend("eager"):
-                    return compute_psfs(lens, system, rel, s).psf
+                with torch.no_grad():
+                    return compute_psfs(lens, system, rel, s, engine=engine).psf
 
             psf, t = timed(run, repeats)
             out.append(Point(knob, label, {"psf": nrmse(psf)}, t))
@@ -321,24 +329,23 @@ def _psf_points(model: Model, knobs: Sequence[str], repeats: int, pitch_um: floa
 
 
 def _sim_points(model: Model, knobs: Sequence[str], repeats: int,
-                progress: Callable[[str], None]) -> tuple[list[Point], dict[str, Any]]:
+                progress: Callable[[str], None], *, engine: Engine | None = None) -> tuple[list[Point], dict[str, Any]]:
     from importlib.resources import files
 
     from lensopt.imaging.io import read_image
     from lensopt.imaging.plan import PlanOptions, parse_effects
     from lensopt.imaging.simulate import plan_scene, run_plan
 
-    img, _ = read_image(files("lensopt.imaging") / "data" / "coffee.png")
+    img, _ = read_image(files("lensopt.imaging") / "data" / "coffee.png", engine=engine)
     h, w, c = img.shape
     info = {"width": w, "height": h, "channels": c}
 
     def simulate(**kw: Any) -> np.ndarray:
         opts = PlanOptions(**{"sampling": "rings:16", **kw})
-        with use_backend("eager"):
-            plan, pilot, reg, sensor = plan_scene(model, info, region="corner",
-                                                  effects=parse_effects("+convolution,-noise"), options=opts)
-        with torch.inference_mode(), use_backend("eager"):
-            return run_plan(model, plan, pilot, reg, sensor, img, opts).image
+        plan, pilot, reg, sensor = plan_scene(model, info, region="corner",
+                                              effects=parse_effects("+convolution,-noise"), options=opts, engine=engine)
+        with torch.inference_mode():
+            return run_plan(model, plan, pilot, reg, sensor, img, opts, engine=engine).image
 
     progress("reference simulation (12x9 grid, 36 fields, rings:48)")
     t0 = time.perf_counter()
@@ -366,9 +373,13 @@ def _sim_points(model: Model, knobs: Sequence[str], repeats: int,
 
 
 def run_accuracy(model: Model, *, knobs: Sequence[str] = DEFAULT_KNOBS, repeats: int = 3, pitch_um: float | None = None,
-                 progress: Callable[[float, str], None] | None = None) -> AccuracyResult:
-    """Measure every knob in ``knobs`` on ``model`` (see the module doc); ``progress(fraction, what)``."""
+                 progress: Callable[[float, str], None] | None = None, engine: Engine | None = None) -> AccuracyResult:
+    """Measure every knob in ``knobs`` on ``model`` (see the module doc); ``progress(fraction, what)``;
+    ``engine``: its memory budget bounds every trace; the ``compiled`` knob traces on its compiled traces,
+    every other knob eagerly."""
     knobs = parse_knobs(",".join(knobs))
+    full = engine or Engine()
+    engine = Engine(max_memory=full.max_memory, on_compile=full.on_compile)  # eager
     report = progress or (lambda f, s: None)
     groups = [k for k in knobs if KNOBS[k] == "esr"]
     analyses = [k for k in knobs if k in ANALYSES]
@@ -382,25 +393,25 @@ def run_accuracy(model: Model, *, knobs: Sequence[str] = DEFAULT_KNOBS, repeats:
         done += 1
 
     tick("spot reference (quadrature, doubling to 1e-9)")
-    ref = spot_reference(model)
+    ref = spot_reference(model, engine=engine)
     reference: dict[str, Any] = {"spot": ref}
     points: list[Point] = []
     compile_s = None
     for k in groups:
         tick(f"{k}")
         if k == "compiled":
-            from lensopt.optics.compiled import clear_compiled_cache
+            from lensopt.accel.compiled import clear_compiled_cache
 
             clear_compiled_cache()
             t0 = time.perf_counter()
-            with torch.no_grad(), use_backend("compiled"):
-                trace_bundle(model.lens, model.system, PupilSampling.parse("rings:4").points(dtype=model.lens.dtype),
-                             half_pupil=True)
+            with torch.no_grad():
+                pts = PupilSampling.parse("rings:4").points(dtype=model.lens.dtype, engine=engine)
+                trace_bundle(model.lens, model.system, pts, half_pupil=True, engine=on_backend(engine, "compiled"))
             compile_s = time.perf_counter() - t0
-        points += _spot_points(model, k, ref, repeats)
+        points += _spot_points(model, k, ref, repeats, engine=engine)
     if "aim_steps" in knobs:
         tick("aim_steps")
-        pts, aim_ref = _aim_points(model, repeats)
+        pts, aim_ref = _aim_points(model, repeats, engine=engine)
         points += pts
         reference["aim"] = aim_ref
     psf_knobs = [k for k in knobs if KNOBS[k] == "psf"]
@@ -408,18 +419,21 @@ def run_accuracy(model: Model, *, knobs: Sequence[str] = DEFAULT_KNOBS, repeats:
         tick("PSFs")
         spec = model.spec
         pitch = pitch_um or (spec.sensor.pixel_pitch_um if spec.sensor is not None else 1.0)
-        pts, reference["psf"] = _psf_points(model, psf_knobs, repeats, pitch, lambda s: report(done / steps, s))
+        pts, reference["psf"] = _psf_points(model, psf_knobs, repeats, pitch, lambda s: report(done / steps, s),
+                                            engine=engine)
         points += pts
         tick("PSFs done")
     sim_knobs = [k for k in knobs if KNOBS[k] == "sim"]
     if sim_knobs:
         tick("simulation")
-        pts, reference["sim"] = _sim_points(model, sim_knobs, max(1, repeats // 2), lambda s: report(done / steps, s))
+        pts, reference["sim"] = _sim_points(model, sim_knobs, max(1, repeats // 2), lambda s: report(done / steps, s),
+                                            engine=engine)
         points += pts
         tick("simulation done")
     if analyses:
         tick("analyses")
-        pts, reference["analyses"] = analysis_points(model, analyses, repeats, lambda s: report(done / steps, s))
+        pts, reference["analyses"] = analysis_points(model, analyses, repeats, lambda s: report(done / steps, s),
+                                                     engine=engine)
         points += pts
         tick("analyses done")
     report(1.0, "done")

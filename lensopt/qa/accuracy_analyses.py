@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from lensopt.optics.backend import use_backend
+from lensopt.engine import Engine
 from lensopt.qa.measure import Point, timed
 from lensopt.spec.build import Model
 
@@ -62,13 +62,17 @@ def _rel(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(a - b)) / max(float(np.max(np.abs(b))), 1e-300))
 
 
+Knob = tuple[list[tuple[str, Any]], Callable[..., np.ndarray], Any, Callable[..., float]]
+"""(label and value of each setting, the function of a setting, the reference setting, error)."""
+
+
 def _note(metric: str, err: float) -> str:
     return f"{ANALYSIS_METRICS[metric]}: {err:.2e}"
 
 
-def analysis_points(model: Model, knobs: Sequence[str], repeats: int,
-                    progress: Callable[[str], None]) -> tuple[list[Point], dict[str, Any]]:
-    """Points of the analysis knobs in ``knobs`` and the reference timings (see the module doc)."""
+def knob_table(model: Model, *, engine: Engine | None = None) -> dict[str, Knob]:
+    """knob → (label and value of each setting, the function of a setting, the reference setting, error of
+    a setting's result against the reference's) for ``model``; every trace on ``engine``."""
     from lensopt.analysis.encircled import diffraction_energy, geometric_energy
     from lensopt.analysis.field_curves import chromatic_focal_shift, field_curves
     from lensopt.analysis.mtf_field import mtf_vs_field, through_focus_mtf
@@ -86,7 +90,7 @@ def analysis_points(model: Model, knobs: Sequence[str], repeats: int,
 
     def grid_wavefront(n: int):
         pts, inside = map_grid(n, dtype=lens.dtype)
-        return wavefront(lens, system, pts[inside], rel_field=rel, fo=fo)
+        return wavefront(lens, system, pts[inside], rel_field=rel, fo=fo, engine=engine)
 
     def wfe(n: int) -> np.ndarray:
         return wavefront_stats(grid_wavefront(n)).rms.numpy()
@@ -96,7 +100,7 @@ def analysis_points(model: Model, knobs: Sequence[str], repeats: int,
         return fit_zernike(wf.pupil, wf.opd, wf.valid, ordering="fringe", terms=37).coefficients.numpy()
 
     def r80(sampling: str) -> np.ndarray:
-        e = geometric_energy(lens, system, rel_field=rel, sampling=sampling)
+        e = geometric_energy(lens, system, rel_field=rel, sampling=sampling, engine=engine)
         r = e.radius_mm.numpy()
         return np.array([np.interp(0.8, c, r) for c in e.encircled.numpy()])
 
@@ -106,21 +110,21 @@ def analysis_points(model: Model, knobs: Sequence[str], repeats: int,
         airy = 1.22 * float(lens.wavelength_um[system.reference]) * 1e-3 * abs(float(fo.working_fnumber))
         radii = torch.linspace(0.0, 6.0 * airy, 25, dtype=lens.dtype)
         return diffraction_energy(lens, system, rel_field=axis, radii=radii, pupil_samples=n,
-                                  pitch_mm=airy / (24 if fine else 12)).encircled.numpy()
+                                  pitch_mm=airy / (24 if fine else 12), engine=engine).encircled.numpy()
 
     focus = torch.linspace(-4.0, 4.0, 5, dtype=lens.dtype) * 2.0 * float(lens.wavelength_um[system.reference]) \
         * 1e-3 * float(fo.working_fnumber) ** 2
 
     def tf(sampling: str) -> np.ndarray:
-        r = through_focus_mtf(lens, system, nus, focus_mm=focus, rel_field=rel, sampling=sampling)
+        r = through_focus_mtf(lens, system, nus, focus_mm=focus, rel_field=rel, sampling=sampling, engine=engine)
         return np.stack([r.sagittal.numpy(), r.tangential.numpy()])
 
     def mtf(sampling: str) -> np.ndarray:
-        r = mtf_vs_field(lens, system, nus, fields=11, sampling=sampling)
+        r = mtf_vs_field(lens, system, nus, fields=11, sampling=sampling, engine=engine)
         return np.stack([r.sagittal.numpy(), r.tangential.numpy()])
 
     def field(delta: float) -> np.ndarray:
-        c = field_curves(lens, system, rel, delta=delta)
+        c = field_curves(lens, system, rel, delta=delta, engine=engine)
         return np.stack([c.tangential_mm.numpy(), c.sagittal_mm.numpy()])
 
     def focal(samples: int) -> np.ndarray:
@@ -128,12 +132,11 @@ def analysis_points(model: Model, knobs: Sequence[str], repeats: int,
         dense = torch.linspace(float(s.wavelength_um.min()), float(s.wavelength_um.max()), 401)
         return np.interp(dense.numpy(), s.wavelength_um.numpy(), s.shift_mm.numpy())
 
-    # knob → (label of each setting, the function of the setting, the reference setting, metric, error)
-    table: dict[str, tuple[list[tuple[str, Any]], Callable[..., np.ndarray], Any, Callable[..., float]]] = {
+    return {
         "wavefront": ([(f"pupil grid {n}", n) for n in (8, 16, 32, 64)], wfe, 160, _rel),
         "zernike": ([(f"pupil grid {n}, Fringe 37", n) for n in (8, 16, 32, 64)], zern, 160, _rel),
         "strehl": ([(f"pupil samples {n}", n) for n in (16, 32, 48)],
-                   lambda n: strehl(lens, system, rel_field=rel, pupil_samples=n).psf.numpy(), 96,
+                   lambda n: strehl(lens, system, rel_field=rel, pupil_samples=n, engine=engine).psf.numpy(), 96,
                    lambda a, b: float(np.max(np.abs(a - b)))),
         "seidel": ([("paraxial sums", None)], lambda _: seidel_sums(lens, system).total.numpy(), None,
                    lambda a, b: 0.0),
@@ -148,6 +151,14 @@ def analysis_points(model: Model, knobs: Sequence[str], repeats: int,
         "through_focus": ([(f"rings:{n}, 5 focus × {len(system.rel_field)} fields", f"rings:{n}")
                            for n in (8, 16, 32)], tf, "rings:96", lambda a, b: float(np.max(np.abs(a - b)))),
     }
+
+
+def analysis_points(model: Model, knobs: Sequence[str], repeats: int,
+                    progress: Callable[[str], None], *,
+                    engine: Engine | None = None) -> tuple[list[Point], dict[str, Any]]:
+    """Points of the analysis knobs in ``knobs`` and the reference timings (see the module doc); every
+    trace on ``engine`` (its memory budget; the accuracy command's engine traces eagerly)."""
+    table = knob_table(model, engine=engine)
     points: list[Point] = []
     info: dict[str, Any] = {}
     for knob in knobs:
@@ -155,14 +166,14 @@ def analysis_points(model: Model, knobs: Sequence[str], repeats: int,
         metric = ANALYSIS_KNOBS[knob]
         progress(f"{knob}: reference")
         t0 = time.perf_counter()
-        with torch.no_grad(), use_backend("eager"):
+        with torch.no_grad():
             ref = fn(ref_setting) if knob != "encircled_diffraction" else fn(ref_setting, True)
         info[knob] = {"reference": str(ref_setting), "time_s": time.perf_counter() - t0}
         for label, setting in settings:
             progress(f"{knob}: {label}")
 
             def run(setting: Any = setting, fn: Callable[..., np.ndarray] = fn) -> np.ndarray:
-                with torch.no_grad(), use_backend("eager"):
+                with torch.no_grad():
                     return fn(setting)
 
             out, t = timed(run, repeats)

@@ -24,9 +24,10 @@ from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree as ET
 
+from lensopt.accel import on_backend
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.files import write_text_atomic
-from lensopt.optics.backend import use_backend
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec.build import build
 from lensopt.spec.io import load_spec
@@ -83,24 +84,25 @@ def identity(spec: LensSpec) -> dict[str, Any]:
             "wavelengths_nm": list(spec.spectrum.wavelengths_nm), "fields": list(spec.system.field.relative)}
 
 
-def measure(spec: LensSpec, settings: CheckSettings) -> dict[str, float]:
-    """Every metric of one lens, with ``settings`` (floats; counts as floats too)."""
+def measure(spec: LensSpec, settings: CheckSettings, *, engine: Engine | None = None) -> dict[str, float]:
+    """Every metric of one lens, with ``settings`` (floats; counts as floats too), traced on the baseline's
+    backend (``settings.backend``) within ``engine``'s memory budget."""
     from lensopt.analysis.report import trace_report
 
+    engine = on_backend(engine, settings.backend)
     sampling = PupilSampling.parse(settings.sampling, seed=settings.seed, path="settings.sampling", weighted=True)
-    with use_backend(settings.backend):
-        rep = trace_report(build(spec), sampling)
-        out: dict[str, float] = {}
-        fo = rep["first_order"]
-        out.update(efl_mm=fo["efl"], bfl_mm=fo["bfl"], fnumber=fo["fnumber"], ttl_mm=fo["total_track"],
-                   esr_um=rep["effective_spot_radius_um"])
-        for f in rep["fields"]:
-            at = f"@{f['relative']:.2f}"
-            out["rms_um" + at] = f["rms_spot_radius_weighted_um"]
-            out["distortion_percent" + at] = _num(f["distortion_percent"])
-            out["ri" + at] = _num(f["relative_illumination"]["std"])
-            out["failed_rays" + at] = float(f["failed_rays"])
-        out.update(_margins(spec, sampling))
+    rep = trace_report(build(spec), sampling, engine=engine)
+    out: dict[str, float] = {}
+    fo = rep["first_order"]
+    out.update(efl_mm=fo["efl"], bfl_mm=fo["bfl"], fnumber=fo["fnumber"], ttl_mm=fo["total_track"],
+               esr_um=rep["effective_spot_radius_um"])
+    for f in rep["fields"]:
+        at = f"@{f['relative']:.2f}"
+        out["rms_um" + at] = f["rms_spot_radius_weighted_um"]
+        out["distortion_percent" + at] = _num(f["distortion_percent"])
+        out["ri" + at] = _num(f["relative_illumination"]["std"])
+        out["failed_rays" + at] = float(f["failed_rays"])
+    out.update(_margins(spec, sampling, engine))
     return out
 
 
@@ -108,7 +110,7 @@ def _num(v: float | None) -> float:
     return math.nan if v is None else float(v)
 
 
-def _margins(spec: LensSpec, sampling: PupilSampling) -> dict[str, float]:
+def _margins(spec: LensSpec, sampling: PupilSampling, engine: Engine) -> dict[str, float]:
     """Constraint margins (positive: inside the limit) of the constraints the spec declares."""
     if spec.optimize is None:
         return {}
@@ -116,7 +118,7 @@ def _margins(spec: LensSpec, sampling: PupilSampling) -> dict[str, float]:
     from lensopt.optim.report import constraint_report
 
     cons = spec.optimize.constraints
-    problem = build_problem(spec, seed=sampling.seed)
+    problem = build_problem(spec, seed=sampling.seed, engine=engine)
     rep = constraint_report(problem, problem.theta0, sampling)
     out: dict[str, float] = {}
     if "gaps" in rep:
@@ -175,7 +177,7 @@ def _keys(paths: list[Path]) -> list[str]:
     return keys
 
 
-def check_lenses(paths: list[Path], baseline: dict[str, Any]) -> list[LensCheck]:
+def check_lenses(paths: list[Path], baseline: dict[str, Any], *, engine: Engine | None = None) -> list[LensCheck]:
     """Measure each lens with the baseline's settings and compare (bad input raises ``LensoptError``)."""
     settings = CheckSettings(**baseline["settings"])
     out = []
@@ -192,7 +194,7 @@ def check_lenses(paths: list[Path], baseline: dict[str, Any]) -> list[LensCheck]
         tol = dict(CHECK_METRICS)
         if spec.check is not None:
             tol.update(spec.check.tolerances)
-        now = measure(spec, settings)
+        now = measure(spec, settings, engine=engine)
         res = LensCheck(key, spec.name)
         for metric in sorted(set(now) | set(entry["metrics"]), key=_order):
             b = entry["metrics"].get(metric)
@@ -217,7 +219,8 @@ def _passes(b: float | None, v: float | None, tol: float) -> bool:
     return abs(v - b) <= tol
 
 
-def update_baseline(paths: list[Path], baseline_path: Path, *, settings: CheckSettings | None = None) -> dict:
+def update_baseline(paths: list[Path], baseline_path: Path, *, settings: CheckSettings | None = None,
+                    engine: Engine | None = None) -> dict:
     """Measure the lenses and (re)write their entries in the baseline atomically; other entries stay."""
     data: dict[str, Any]
     if baseline_path.exists():
@@ -234,7 +237,7 @@ def update_baseline(paths: list[Path], baseline_path: Path, *, settings: CheckSe
     data = {"lensopt_check": FORMAT, "settings": asdict(settings), "lenses": dict(data.get("lenses", {}))}
     for key, path in zip(_keys(paths), paths, strict=True):
         spec = _load_lens(path)
-        data["lenses"][key] = {"identity": identity(spec), "metrics": measure(spec, settings)}
+        data["lenses"][key] = {"identity": identity(spec), "metrics": measure(spec, settings, engine=engine)}
     data["lenses"] = dict(sorted(data["lenses"].items()))
     write_text_atomic(baseline_path, json.dumps(data, indent=1, allow_nan=True) + "\n")
     return data

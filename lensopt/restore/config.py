@@ -1,5 +1,5 @@
 """The restoration model's configuration as a plain dataclass (the core never sees pydantic; the
-``[restore]`` spec section in ``lensopt.spec.restore`` converts to this)."""
+``[restore]`` spec section, ``lensopt.spec.restore``, becomes these in ``lensopt.design.restore``)."""
 
 from __future__ import annotations
 

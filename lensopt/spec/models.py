@@ -41,7 +41,7 @@ __all__ = [
     "AsphereSurface",
     "DiffractiveSurface",
     "SurfaceSpec",
-    "ImageSpec",
+    "ImagePlaneSpec",
     "ElementPlacementSpec",
     "LensSpec",
     "curvature_of",
@@ -473,8 +473,8 @@ class ElementPlacementSpec(_Model):
         return v
 
 
-class ImageSpec(_Model):
-    """The flat image surface after the last gap; ``defocus`` (mm) moves it along the axis."""
+class ImagePlaneSpec(_Model):
+    """``[image]``: the flat image surface after the last gap; ``defocus`` (mm) moves it along the axis."""
 
     defocus: float = 0.0
 
@@ -515,7 +515,7 @@ class LensSpec(_Model):
     spectrum: SpectrumSpec
     sensor: SensorSpec | None = None
     surfaces: list[SurfaceSpec] = Field(min_length=1)
-    image: ImageSpec = Field(default_factory=ImageSpec)
+    image: ImagePlaneSpec = Field(default_factory=ImagePlaneSpec)
     elements: list[ElementPlacementSpec] | None = None
     optimize: OptimizeSpec | None = None
     tolerance: ToleranceSpec | None = None

@@ -1,16 +1,15 @@
 """The ``[restore]`` spec section: the image restoration network (S3.2) and its training (S3.3.1).
 
 Read by ``lensopt train-irm`` and by ``lensopt optimize`` with ``objective = "restored"``; the core
-receives plain dataclasses (``lensopt.restore.config``), never these models.
+receives plain dataclasses (``lensopt.restore.config``, converted by ``lensopt.design.restore``), never
+these models.
 """
 
 from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from lensopt.restore.config import RestoreConfig, TrainConfig
-
-__all__ = ["RestoreSpec", "RestoreTrainSpec", "configs_from_spec"]
+__all__ = ["RestoreSpec", "RestoreTrainSpec"]
 
 
 class _Model(BaseModel):
@@ -72,17 +71,3 @@ class RestoreSpec(_Model):
         if any(b < 0 for b in self.encoder_blocks + self.decoder_blocks):
             raise ValueError("@encoder_blocks: block counts must be ≥ 0")
         return self
-
-
-def configs_from_spec(section: RestoreSpec | None) -> tuple[RestoreConfig, TrainConfig]:
-    """The core's plain configs from a ``[restore]`` section (None: the defaults)."""
-    if section is None:
-        return RestoreConfig(), TrainConfig()
-    net = RestoreConfig(width=section.width, encoder_blocks=tuple(section.encoder_blocks),
-                        middle_blocks=section.middle_blocks, decoder_blocks=tuple(section.decoder_blocks),
-                        snr=section.snr)
-    t = section.train
-    train = TrainConfig(steps=t.steps, batch=t.batch, patch=t.patch, lr=t.lr, betas=tuple(t.betas), lr_min=t.lr_min,
-                        noise_sigma=t.noise_sigma, checkpoint_every=t.checkpoint_every,
-                        validate_every=t.validate_every, validation_patches=t.validation_patches)
-    return net, train

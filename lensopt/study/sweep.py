@@ -22,6 +22,7 @@ N starts per grid point, the best start kept per point. Library code: no printin
 from __future__ import annotations
 
 import csv
+import functools
 import hashlib
 import io
 import itertools
@@ -36,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.files import json_safe, write_text_atomic
 from lensopt.parallel import run_tasks
@@ -155,7 +157,8 @@ def expand_grid(spec: LensSpec, varies: Sequence[Vary]) -> list[Point]:
 # ------------------------------------------------------------------------------------- starts
 
 
-def perturbed_spec(spec: LensSpec, point: int, start: int, settings: Settings) -> LensSpec:
+def perturbed_spec(spec: LensSpec, point: int, start: int, settings: Settings, *,
+                   engine: Engine | None = None) -> LensSpec:
     """Start ``start`` of grid point ``point``: the spec itself for start 0, else θ0 perturbed (module
     doc) and written back. Deterministic in (settings.seed, point, start).
 
@@ -168,7 +171,7 @@ def perturbed_spec(spec: LensSpec, point: int, start: int, settings: Settings) -
 
     from lensopt.design import build_problem, to_spec
 
-    problem = build_problem(spec, seed=settings.seed)
+    problem = build_problem(spec, seed=settings.seed, engine=engine)
     theta0 = problem.theta0
     rng = np.random.default_rng([settings.seed, point, start])
     z = torch.from_numpy(rng.standard_normal(theta0.shape[0])).to(theta0)
@@ -183,7 +186,7 @@ def perturbed_spec(spec: LensSpec, point: int, start: int, settings: Settings) -
         raise LensoptError(f"the perturbed start is not a valid spec: {' '.join(str(err).split())}") from None
 
 
-def run_task(settings: Settings, task: Task) -> tuple[dict[str, Any], str | None]:
+def run_task(settings: Settings, task: Task, *, engine: Engine | None = None) -> tuple[dict[str, Any], str | None]:
     """One (point, start): perturb, optimize, evaluate. Returns the record and the optimized lens as JSON
     text (None when the start failed). Runs on a Dask worker or in-process, with one torch thread."""
     import torch
@@ -195,12 +198,12 @@ def run_task(settings: Settings, task: Task) -> tuple[dict[str, Any], str | None
     try:
         spec = parse_spec(json.loads(task.spec_json))
         try:
-            start_spec = perturbed_spec(spec, task.point, task.start, settings)
-            result = optimize(start_spec, steps=settings.steps, seed=settings.seed)
+            start_spec = perturbed_spec(spec, task.point, task.start, settings, engine=engine)
+            result = optimize(start_spec, steps=settings.steps, seed=settings.seed, engine=engine)
             if result.interrupted:  # Ctrl-C in a serial run: the start is not finished
                 raise KeyboardInterrupt
-            merit, physical, reason, esr_opt = _final_merit(result.spec, settings)
-            esr = _report_esr(result.spec, settings) if physical else None
+            merit, physical, reason, esr_opt = _final_merit(result.spec, settings, engine=engine)
+            esr = _report_esr(result.spec, settings, engine=engine) if physical else None
         except LensoptError as err:  # the start cannot run, or its result cannot be evaluated
             record.update(status="failed", reason=str(err), wall_s=time.perf_counter() - t0)
             return record, None
@@ -214,18 +217,19 @@ def run_task(settings: Settings, task: Task) -> tuple[dict[str, Any], str | None
         torch.set_num_threads(threads)
 
 
-def optimize(spec: LensSpec, *, steps: int | None, seed: int):  # noqa: ANN201 - design.optimize, by name
+def optimize(spec: LensSpec, *, steps: int | None, seed: int,
+             engine: Engine | None = None):  # noqa: ANN201 - design.optimize, by name
     """``lensopt.design.optimize`` (a module-level name, so that tests can count the calls)."""
     from lensopt.design import optimize as run_optimize
 
-    return run_optimize(spec, steps=steps, seed=seed)
+    return run_optimize(spec, steps=steps, seed=seed, engine=engine)
 
 
-def _final_merit(spec: LensSpec, settings: Settings) -> tuple[float, bool, str, float]:
+def _final_merit(spec: LensSpec, settings: Settings, *, engine: Engine | None = None) -> tuple[float, bool, str, float]:
     """(½‖ℓ‖² with the final weights, physical, reason, ESR of the optimization rays µm) of a lens."""
     from lensopt.design import build_problem
 
-    problem = build_problem(spec, seed=settings.seed)
+    problem = build_problem(spec, seed=settings.seed, engine=engine)
     ev = problem.evaluate(problem.theta0)
     if not ev.physical:
         return math.nan, False, ev.reason, math.nan
@@ -233,13 +237,14 @@ def _final_merit(spec: LensSpec, settings: Settings) -> tuple[float, bool, str, 
     return 0.5 * float((r**2).sum()), True, "", 1e3 * problem.esr_mm(ev.residuals)
 
 
-def _report_esr(spec: LensSpec, settings: Settings) -> float | None:
+def _report_esr(spec: LensSpec, settings: Settings, *, engine: Engine | None = None) -> float | None:
     """ESR in µm as ``lensopt trace`` / ``lensopt optimize`` report it (None when rays fail)."""
     from lensopt.analysis.report import trace_report
     from lensopt.optics.sampling import PupilSampling
     from lensopt.spec.build import build
 
-    rep = trace_report(build(spec), PupilSampling.parse(settings.esr_sampling, seed=settings.seed, weighted=True))
+    rep = trace_report(build(spec), PupilSampling.parse(settings.esr_sampling, seed=settings.seed, weighted=True),
+                       engine=engine)
     return rep["effective_spot_radius_um"]
 
 
@@ -387,7 +392,8 @@ def _is_num(v: Any) -> bool:
 def run_sweep(spec: LensSpec, spec_text: str, varies: Sequence[Vary], settings: Settings, outdir: Path, *,
               scheduler: str | None = None, workers: int = 2, restart: bool = False, spec_name: str = "",
               callback: Callable[[SweepEvent], None] | None = None, plot: bool = True,
-              points: list[Point] | None = None, on_plan: Callable[[str], None] | None = None) -> SweepResult:
+              points: list[Point] | None = None, on_plan: Callable[[str], None] | None = None,
+              engine: Engine | None = None) -> SweepResult:
     """Run (or resume) a sweep into ``outdir`` and write its outputs.
 
     Args:
@@ -432,8 +438,8 @@ def run_sweep(spec: LensSpec, spec_text: str, varies: Sequence[Vary], settings: 
             callback(SweepEvent("done", t.point, t.start, record))
 
     try:
-        run_tasks(run_task, todo, shared=settings, scheduler=scheduler, workers=workers, on_done=done,
-                  on_plan=on_plan)
+        run_tasks(functools.partial(run_task, engine=engine), todo, shared=settings, scheduler=scheduler,
+                  workers=workers, on_done=done, on_plan=on_plan)
     except KeyboardInterrupt:
         result.interrupted = True
     result.rows = table(points, records, settings.starts)

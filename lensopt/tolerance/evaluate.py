@@ -28,6 +28,7 @@ import torch
 from torch import Tensor
 
 from lensopt.analysis.spot import safe_sqrt
+from lensopt.engine import Engine
 from lensopt.optics.bundle import Bundle, trace_bundle
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import chief_image_height, field_tangents
@@ -64,6 +65,7 @@ class EvalSetup:
         aim: ``none`` (every trial fills the nominal paraxial entrance pupil) or ``chief`` (each trial's
             chief rays aimed at the centre of its own, possibly decentered or tilted, stop, in x and y;
             ``optics.aiming``).
+        engine: trace backend and memory budget of the trials' traces (default ``Engine()``).
     """
 
     lens: Lens
@@ -79,6 +81,7 @@ class EvalSetup:
     field_xy: Tensor | None = None
     field_weights: tuple[float, ...] | None = None
     aim: str = "none"
+    engine: Engine | None = None
 
 
 def _centroid(u: Tensor, w: Tensor, half: bool) -> Tensor:
@@ -152,7 +155,8 @@ def _azimuth(lens: Lens, system: System, field_xy: Tensor) -> tuple[Tensor, Tens
 def _trace(setup: EvalSetup, lens: Lens) -> tuple[Bundle, Tensor | None]:
     """The trial's bundle; for two-dimensional fields also the unit field directions (F, 2)."""
     if setup.field_xy is None:
-        return trace_bundle(lens, setup.system, setup.pupil, half_pupil=setup.half, aim=setup.aim), None
+        return trace_bundle(lens, setup.system, setup.pupil, half_pupil=setup.half, aim=setup.aim,
+                            engine=setup.engine), None
     _, _, s = _azimuth(lens, setup.system, setup.field_xy)
     px, py = setup.pupil[:, 0].to(lens.dtype), setup.pupil[:, 1].to(lens.dtype)
     sx, sy = s[:, 0:1], s[:, 1:2]
@@ -160,7 +164,7 @@ def _trace(setup: EvalSetup, lens: Lens) -> tuple[Bundle, Tensor | None]:
     pupil = torch.stack([px * sy + py * sx, -px * sx + py * sy], -1)[:, None]  # (F, 1, P, 2)
     fxy = setup.field_xy.to(lens.dtype)
     b = trace_bundle(lens, setup.system, pupil, half_pupil=False, aim=setup.aim, rel_field=fxy[:, 1],
-                     rel_field_x=fxy[:, 0])
+                     rel_field_x=fxy[:, 0], engine=setup.engine)
     return b, s
 
 

@@ -28,6 +28,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from lensopt.engine import Engine
 from lensopt.imaging.camera import Camera
 from lensopt.imaging.evaluate import evaluate as evaluate_images
 from lensopt.imaging.evaluate import scene_source
@@ -54,6 +55,7 @@ class PsnrSetup:
         focus_reference: the nominal lens's compensator focus shift Δz_0, mm.
         lm_reference: the nominal lens's LM offsets (V,), or None.
         lm_vars: the LM compensators (kind, surface), as in ``EvalSetup``.
+        engine: trace backend and memory budget of the imaging (default ``Engine()``).
     """
 
     camera: Camera
@@ -66,12 +68,13 @@ class PsnrSetup:
     focus_reference: float = 0.0
     lm_reference: tuple[float, ...] | None = None
     lm_vars: tuple[tuple[str, int], ...] = ()
+    engine: Engine | None = None
 
     def evaluate_kwargs(self) -> dict[str, Any]:
         """The settings of ``imaging.evaluate`` (those of ``lensopt evaluate --count --patch --rays --noise
         --seed`` with the default kernel and rings)."""
         return {"patch": self.patch, "seed": self.seed, "noise_sigma": self.noise_sigma,
-                "options": PlanOptions(sampling=self.sampling, seed=self.seed)}
+                "options": PlanOptions(sampling=self.sampling, seed=self.seed), "engine": self.engine}
 
 
 def trial_lens(lens: Lens, placement: Any, params: TrialParams, focus_shift: float,

@@ -1,6 +1,6 @@
 """A tolerance ``Job`` from a traced lens, its system and media, and ``[tolerance]``-like settings (any
 object with the ``ToleranceSpec`` attributes; this layer does not import the spec package —
-``lensopt.spec.tolerance_build`` ties a built spec to it and writes trials back as specs).
+``lensopt.design.tolerance`` ties a built spec to it and writes trials back as specs).
 
 ``tolerances_for`` expands the settings' items (kind, limit, surfaces or elements, distribution)
 against the lens: default targets are every surface a kind applies to.
@@ -13,14 +13,15 @@ from typing import Any
 
 import torch
 
+from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.materials import Material
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.sampling import PupilSampling
 from lensopt.tolerance.evaluate import EvalSetup
+from lensopt.tolerance.job import Job
 from lensopt.tolerance.model import KINDS, Tolerance, elements_of, glass_gaps, nominal_params, s62_profile
-from lensopt.tolerance.run import Job
 
 __all__ = ["tolerances_for", "make_job", "semi_apertures", "d_line_indices", "field_points"]
 
@@ -88,11 +89,11 @@ def d_line_indices(media: Sequence[Material], *, dtype: torch.dtype = torch.floa
     return torch.stack([m.index(wl)[0] for m in media]).to(dtype)
 
 
-def semi_apertures(lens: Lens, system: System) -> torch.Tensor:
+def semi_apertures(lens: Lens, system: System, *, engine: Engine | None = None) -> torch.Tensor:
     """(S,) semi-aperture per surface: the lens's semi_diameter, else the largest height of the nominal
     rays (full pupil edge, every field and wavelength)."""
-    pupil = PupilSampling.parse("rings:4:nojitter").points(dtype=lens.dtype)
-    b = trace_bundle(lens, system, pupil, half_pupil=True, record=True, aim="none")
+    pupil = PupilSampling.parse("rings:4:nojitter").points(dtype=lens.dtype, engine=engine)
+    b = trace_bundle(lens, system, pupil, half_pupil=True, record=True, aim="none", engine=engine)
     out = []
     for s, hit in enumerate(b.result.hits):
         r = torch.linalg.vector_norm(hit.pos[..., :2], dim=-1)
@@ -122,9 +123,11 @@ def field_points(system: System, fields: Any) -> tuple[list[tuple[float, float]]
 
 
 def make_job(lens: Lens, system: System, media: Sequence[Material], settings: Any, *,
-             lm_vars: tuple[tuple[str, int], ...] = (), tols: list[Tolerance] | None = None) -> Job:
+             lm_vars: tuple[tuple[str, int], ...] = (), tols: list[Tolerance] | None = None,
+             engine: Engine | None = None) -> Job:
     """The ``Job`` of a lens and its tolerance settings (``ToleranceSpec``-like); ``lm_vars``: the LM
-    compensators (``curvature``/``thickness``, surface) of ``compensator = "lm"``."""
+    compensators (``curvature``/``thickness``, surface) of ``compensator = "lm"``; ``engine``: trace backend
+    and memory budget of every trial."""
     tols = tolerances_for(lens, settings) if tols is None else tols
     placed = lens.placement is not None or any(t.kind not in ("curvature", "radius", "fringes", "thickness",
                                                               "index", "abbe") for t in tols)
@@ -133,7 +136,7 @@ def make_job(lens: Lens, system: System, media: Sequence[Material], settings: An
             raise LensoptError(f"unknown kind; one of {', '.join(KINDS)}", path="tolerance.items.kind", got=t.kind)
     placement = nominal_params(lens)[1] if placed else None
     sampling = PupilSampling.parse(settings.sampling, seed=settings.seed, path="tolerance.sampling")
-    pupil = sampling.points(dtype=lens.dtype)
+    pupil = sampling.points(dtype=lens.dtype, engine=engine)
     half = sampling.half
     fields_2d = field_points(system, getattr(settings, "fields", "y"))
     field_xy = field_w = None
@@ -151,8 +154,8 @@ def make_job(lens: Lens, system: System, media: Sequence[Material], settings: An
                       compensate=settings.compensator, focus_range=settings.focus_range,
                       mtf_frequency=settings.mtf_frequency, lm_vars=lm_vars,
                       lm_steps=getattr(settings, "lm_steps", 5), field_xy=field_xy, field_weights=field_w,
-                      aim=getattr(settings, "aim", "none"))
-    return Job(setup, tuple(tols), d_line_indices(media, dtype=lens.dtype), semi_apertures(lens, system),
+                      aim=getattr(settings, "aim", "none"), engine=engine)
+    return Job(setup, tuple(tols), d_line_indices(media, dtype=lens.dtype), semi_apertures(lens, system, engine=engine),
                settings.metric, settings.chunk)
 
 

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import pytest
-from psf_lenses import build_oval
 
 from lensopt.spec import Model
+from tests.helpers import oval_model
 
 
 @pytest.fixture(scope="session")
 def oval() -> Model:
-    return build_oval()
+    return oval_model()

@@ -18,7 +18,6 @@ import math
 import numpy as np
 import pytest
 import torch
-from psf_lenses import build_oval
 from scipy.special import j0, j1
 
 from lensopt.analysis.encircled import diffraction_energy, geometric_energy
@@ -28,6 +27,7 @@ from lensopt.analysis.wavefront import opd_fans
 from lensopt.errors import LensoptError
 from lensopt.optics.paraxial import first_order
 from lensopt.spec import build, load_spec, parse_spec
+from tests.helpers import COOKE, oval_model
 
 pytestmark = [pytest.mark.filterwarnings("ignore::DeprecationWarning"),
               pytest.mark.filterwarnings("ignore:.*:numba.core.errors.NumbaIRAssumptionWarning")]
@@ -39,7 +39,8 @@ def test_geometric_encircled_energy_matches_optiland(name: str) -> None:
     pytest.importorskip("optiland")
     from optiland.analysis import EncircledEnergy
     from optiland.distribution import create_distribution
-    from optiland_peer import optic_from_model, peer_model
+
+    from tests.analysis.optiland_peer import optic_from_model, peer_model
 
     model = peer_model(name)
     theirs = EncircledEnergy(optic_from_model(model), num_rays=8, distribution="hexapolar", wavelength="primary")
@@ -58,8 +59,8 @@ def test_geometric_encircled_energy_matches_optiland(name: str) -> None:
         np.testing.assert_array_equal(mine.encircled_w[0, ref].numpy(), expect)
 
 
-def test_geometric_energy_invariants() -> None:
-    model = build(load_spec("specs/cooke_triplet.toml"))
+def test_geometric_energy_invariants(cooke) -> None:
+    model = cooke
     e = geometric_energy(model.lens, model.system, rel_field=torch.tensor([0.0, 1.0], dtype=torch.float64))
     assert bool((e.encircled[:, -1] == 1.0).all()) and bool((e.encircled[:, 0] == 0.0).all())
     assert bool((e.encircled.diff(dim=-1) >= 0).all())
@@ -68,7 +69,7 @@ def test_geometric_energy_invariants() -> None:
 
 
 def test_diffraction_encircled_energy_of_a_perfect_lens_is_airy() -> None:
-    model = build_oval(epd=10.0)
+    model = oval_model(epd=10.0)
     lens, system = model.lens, model.system
     wn = float(first_order(lens, system).working_fnumber)
     lam = float(lens.wavelength_um[0]) * 1e-3
@@ -84,14 +85,14 @@ def test_diffraction_encircled_energy_of_a_perfect_lens_is_airy() -> None:
 
 
 def test_diffraction_energy_needs_enough_pupil_samples() -> None:
-    model = build_oval(epd=10.0)
+    model = oval_model(epd=10.0)
     with pytest.raises(LensoptError, match=r"^pupil_samples: too few for radii up to 1000 µm"):
         diffraction_energy(model.lens, model.system, rel_field=AXIS,
                            radii=torch.tensor([0.0, 1.0], dtype=torch.float64), pupil_samples=16)
 
 
 def test_strehl_of_quarter_wave_defocus() -> None:
-    model = build_oval(epd=10.0)
+    model = oval_model(epd=10.0)
     lens, system = model.lens, model.system
     n_img = float(lens.index[-1, 0])
     u = 1 / (2 * float(first_order(lens, system).working_fnumber))
@@ -109,7 +110,7 @@ def test_strehl_of_quarter_wave_defocus() -> None:
 
 
 def test_strehl_of_a_perfect_lens_and_marechal() -> None:
-    model = build_oval(epd=10.0)
+    model = oval_model(epd=10.0)
     s = strehl(model.lens, model.system, rel_field=AXIS, pupil_samples=48)
     assert float(s.psf) == pytest.approx(1.0, abs=1e-9)
     assert float(s.marechal) == pytest.approx(1.0, abs=1e-9)
@@ -117,7 +118,7 @@ def test_strehl_of_a_perfect_lens_and_marechal() -> None:
 
 
 def test_strehl_of_a_real_lens_both_estimates() -> None:
-    spec = load_spec("specs/cooke_triplet.toml").model_dump(mode="json", exclude_none=True)
+    spec = load_spec(COOKE).model_dump(mode="json", exclude_none=True)
     spec["system"]["aperture"] = {"epd": 4.0}  # stopped down to f/12.5: near the diffraction limit
     model = build(parse_spec(spec))
     s = strehl(model.lens, model.system, rel_field=torch.tensor([0.0, 0.5], dtype=torch.float64), pupil_samples=48)

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import math
-import tomllib
-from pathlib import Path
 
 import pytest
 import torch
@@ -12,16 +10,11 @@ import torch
 from lensopt.analysis.fans import ray_fans
 from lensopt.analysis.report import ray_report
 from lensopt.optics.bundle import trace_bundle
-from lensopt.spec import build, load_spec
+from lensopt.spec import build
 from lensopt.spec.io import parse_spec
+from tests.helpers import cooke_data
 
-COOKE = Path(__file__).resolve().parents[2] / "specs" / "cooke_triplet.toml"
 POINTS = 65  # odd: py = 0 is a sample; py = k/32, px = k/64
-
-
-@pytest.fixture(scope="module")
-def cooke():
-    return build(load_spec(COOKE))
 
 
 @pytest.fixture(scope="module")
@@ -32,7 +25,7 @@ def fans(cooke):
 
 def vignetted_model():
     """The Cooke triplet at EPD 12 mm with surface 5 clipped at 6 mm: off-axis fans lose their upper rays."""
-    data = tomllib.loads(COOKE.read_text())
+    data = cooke_data()
     data["system"]["aperture"] = {"epd": 12.0}
     data["surfaces"][4].update(semi_diameter=6.0, clip=True)
     return build(parse_spec(data))

@@ -27,6 +27,7 @@ from lensopt.analysis.mtf_field import defocused
 from lensopt.analysis.seidel import seidel_sums
 from lensopt.optics.paraxial import first_order
 from lensopt.spec import build, load_spec, parse_spec
+from tests.helpers import SPECS
 
 pytestmark = [pytest.mark.filterwarnings("ignore::DeprecationWarning"),
               pytest.mark.filterwarnings("ignore:.*:numba.core.errors.NumbaIRAssumptionWarning")]
@@ -36,7 +37,8 @@ pytestmark = [pytest.mark.filterwarnings("ignore::DeprecationWarning"),
 def test_field_curvature_matches_optiland(name: str) -> None:
     pytest.importorskip("optiland")
     from optiland.analysis import FieldCurvature
-    from optiland_peer import optic_from_model, peer_model
+
+    from tests.analysis.optiland_peer import optic_from_model, peer_model
 
     model = peer_model(name)
     points = 9
@@ -50,9 +52,9 @@ def test_field_curvature_matches_optiland(name: str) -> None:
         assert np.abs(mine.sagittal_mm[:, w].numpy() - sag).max() <= 1e-6 * scale
 
 
-@pytest.mark.parametrize("name", ["specs/cooke_triplet.toml", "specs/double_gauss.toml"])
+@pytest.mark.parametrize("name", ["cooke_triplet.toml", "double_gauss.toml"])
 def test_third_order_limit(name: str) -> None:
-    model = build(load_spec(name))
+    model = build(load_spec(SPECS / name))
     system = model.system
     fo = first_order(model.lens, system)
     lens = defocused(model.lens, fo.bfl - model.lens.thickness[-1])  # the image at the paraxial focus
@@ -81,8 +83,8 @@ def test_third_order_limit(name: str) -> None:
     assert errors[2][3] < 0.05
 
 
-def test_distortion_is_zero_on_axis_and_real() -> None:
-    model = build(load_spec("specs/cooke_triplet.toml"))
+def test_distortion_is_zero_on_axis_and_real(cooke) -> None:
+    model = cooke
     fc = field_curves(model.lens, model.system, torch.tensor([0.0, 0.5, 1.0], dtype=torch.float64))
     assert float(fc.distortion[0]) == 0.0
     ref = model.system.reference

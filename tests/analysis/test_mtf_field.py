@@ -15,7 +15,6 @@ import math
 import numpy as np
 import pytest
 import torch
-from psf_lenses import build_oval
 from scipy.special import j1
 
 from lensopt.analysis.checks import frequencies, relative_fields, wavelength_indices
@@ -28,13 +27,13 @@ from lensopt.analysis.wavefront import opd_fans
 from lensopt.errors import LensoptError
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.paraxial import first_order
-from lensopt.spec import build, load_spec
+from tests.helpers import oval_model
 
 AXIS = torch.zeros(1, dtype=torch.float64)
 
 
 def test_through_focus_of_a_perfect_lens() -> None:
-    model = build_oval(epd=10.0)
+    model = oval_model(epd=10.0)
     lens, system = model.lens, model.system
     nu = torch.tensor([20.0, 60.0], dtype=torch.float64)
     focus = torch.tensor([-0.02, -0.01, 0.0, 0.01, 0.02], dtype=torch.float64)
@@ -53,8 +52,8 @@ def test_through_focus_of_a_perfect_lens() -> None:
     assert bool((tf.best_focus_mm == 0.0).all())
 
 
-def test_mtf_vs_field_is_lens_mtf_at_those_fields() -> None:
-    model = build(load_spec("specs/cooke_triplet.toml"))
+def test_mtf_vs_field_is_lens_mtf_at_those_fields(cooke) -> None:
+    model = cooke
     res = mtf_vs_field(model.lens, model.system, [10.0, 30.0], fields=5)
     assert res.sagittal.shape == (5, 2) and res.rel_field.tolist() == [0.0, 0.25, 0.5, 0.75, 1.0]
     ref = lens_mtf(model.lens, model.system, torch.tensor([10.0, 30.0], dtype=torch.float64),
@@ -64,16 +63,16 @@ def test_mtf_vs_field_is_lens_mtf_at_those_fields() -> None:
 
 
 @pytest.mark.parametrize("bad", [0.0, -5.0, float("nan")])
-def test_frequency_must_be_positive(bad: float) -> None:
-    model = build(load_spec("specs/cooke_triplet.toml"))
+def test_frequency_must_be_positive(cooke, bad: float) -> None:
+    model = cooke
     with pytest.raises(LensoptError, match=r"^frequency: spatial frequency must be > 0 cycles/mm \(got"):
         mtf_vs_field(model.lens, model.system, [10.0, bad])
     with pytest.raises(LensoptError, match="^frequency:"):
         frequencies([bad])
 
 
-def test_field_past_the_field_of_view() -> None:
-    model = build(load_spec("specs/cooke_triplet.toml"))
+def test_field_past_the_field_of_view(cooke) -> None:
+    model = cooke
     with pytest.raises(LensoptError) as err:
         relative_fields(model.system, [0.5, 1.2])
     assert str(err.value) == "field: relative field must lie in [0, 1] (1 = the full field, 20°) (got 1.2)"
@@ -90,8 +89,8 @@ def test_field_past_the_field_of_view() -> None:
             call()
 
 
-def test_wavelength_not_in_the_spec() -> None:
-    model = build(load_spec("specs/cooke_triplet.toml"))
+def test_wavelength_not_in_the_spec(cooke) -> None:
+    model = cooke
     assert wavelength_indices(model.lens, [650.0, 480.0]) == [2, 0]
     with pytest.raises(LensoptError) as err:
         wavelength_indices(model.lens, [587.6], path="--wavelength")

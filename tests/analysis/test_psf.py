@@ -2,17 +2,13 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 import torch
 
 from lensopt.analysis.psf import bin_down, kde, kernel_1d, mirror_half_pupil, ray_count
 from lensopt.analysis.psf_stack import PsfSettings, compute_psfs
 from lensopt.errors import LensoptError
-from lensopt.spec import build, load_spec
 
-SPECS = Path(__file__).resolve().parents[2] / "specs"
 F64 = torch.float64
 
 
@@ -82,8 +78,8 @@ def test_mirror_half_pupil_and_bin_down() -> None:
 
 @pytest.mark.parametrize("kernel", ["count", "triangular", "cosine"])
 @pytest.mark.parametrize("diffraction", ["none", "heuristic", "incoherent"])
-def test_cooke_triplet_psfs_sum_to_one(kernel: str, diffraction: str) -> None:
-    model = build(load_spec(SPECS / "cooke_triplet.toml"))
+def test_cooke_triplet_psfs_sum_to_one(cooke, kernel: str, diffraction: str) -> None:
+    model = cooke
     rel = torch.tensor([0.0, 1.0], dtype=F64)
     st = compute_psfs(model.lens, model.system, rel, PsfSettings(sampling="rings:8", kernel=kernel,
                                                                    pitch_mm=2e-3, diffraction=diffraction))
@@ -92,11 +88,11 @@ def test_cooke_triplet_psfs_sum_to_one(kernel: str, diffraction: str) -> None:
     assert float(st.psf.min()) >= -1e-15
 
 
-def test_psf_gradient_wrt_lens_is_finite_with_failing_rays() -> None:
+def test_psf_gradient_wrt_lens_is_finite_with_failing_rays(cooke) -> None:
     # Clip the stop so that some rays fail: the KDE PSF must stay differentiable with finite gradients.
     import dataclasses
 
-    model = build(load_spec(SPECS / "cooke_triplet.toml"))
+    model = cooke
     lens = model.lens
     curv = lens.curvature.clone().requires_grad_(True)
     shapes = tuple(dataclasses.replace(s, clip=(i == 0)) for i, s in enumerate(lens.shapes))
@@ -118,13 +114,13 @@ def test_bad_settings_name_the_field() -> None:
         kde(torch.zeros(1, 1, 2), torch.ones(1, 1, dtype=torch.bool), torch.zeros(1, 2), pitch=1.0, size=5, support=3)
 
 
-def test_psf_gradient_wrt_curvature_matches_finite_differences() -> None:
+def test_psf_gradient_wrt_curvature_matches_finite_differences(cooke) -> None:
     # The KDE path is differentiable in the lens: autograd against central differences (float64). The cosine
     # kernel is C¹ (the triangular one has kinks at bin centres, which central differences straddle once a
     # ray crosses one); diffraction is off so the check covers trace → KDE → centroid-centred grid.
     import dataclasses
 
-    model = build(load_spec(SPECS / "cooke_triplet.toml"))
+    model = cooke
     lens, system = model.lens, model.system
     rel = torch.tensor([0.0, 1.0], dtype=F64)
     weights = torch.rand(2, 3, 15, 15, generator=torch.Generator().manual_seed(5), dtype=F64)

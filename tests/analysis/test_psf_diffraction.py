@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,10 +12,8 @@ from scipy.special import j1
 from lensopt.analysis.psf_diffraction import airy_field, diffraction_heuristic, fft_convolve_same
 from lensopt.analysis.psf_reference import diffraction_psf
 from lensopt.analysis.psf_stack import PsfSettings, compute_psfs
-from lensopt.spec import build, load_spec
 
 F64 = torch.float64
-SPECS = Path(__file__).resolve().parents[2] / "specs"
 
 
 def airy_intensity(size: int, pitch_um: float, lam_um: float, na: float, sub: int) -> np.ndarray:
@@ -69,10 +66,10 @@ def test_reference_psf_of_a_perfect_lens_is_the_airy_pattern(oval) -> None:
     assert ref.sum() == pytest.approx(1.0, abs=1e-12)
 
 
-def test_reference_psf_agrees_with_rays_where_aberrations_dominate() -> None:
+def test_reference_psf_agrees_with_rays_where_aberrations_dominate(cooke) -> None:
     # Cooke triplet full field: RMS spot ~13 µm vs Airy radius 3.4 µm. Geometric optics is the short-wavelength
     # limit of the diffraction PSF, so centroid and spread must agree closely (and the sign of the x/y axes).
-    model = build(load_spec(SPECS / "cooke_triplet.toml"))
+    model = cooke
     rel = torch.tensor([1.0], dtype=F64)
     st = compute_psfs(model.lens, model.system, rel, PsfSettings(sampling="rings:48", pitch_mm=2e-3, size=41,
                                                                    diffraction="none"))

@@ -9,22 +9,18 @@ expectation these tests use — and an on-axis PSF stays centred (symmetric unde
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 import torch
 
 from lensopt.analysis.psf import deposit
 from lensopt.analysis.psf_stack import PsfSettings, compute_psfs
-from lensopt.spec import build, load_spec
 
 F64 = torch.float64
-SPECS = Path(__file__).resolve().parents[2] / "specs"
 
 
 @pytest.mark.parametrize("o", [2, 4])
-def test_even_oversampled_ray_count_equals_coarse_count(o: int) -> None:
-    model = build(load_spec(SPECS / "cooke_triplet.toml"))
+def test_even_oversampled_ray_count_equals_coarse_count(cooke, o: int) -> None:
+    model = cooke
     rel = torch.tensor([0.0, 0.7, 1.0], dtype=F64)
     kw = dict(sampling="rings:12:nojitter", kernel="count", pitch_mm=4e-3, diffraction="none", size=31)
     coarse = compute_psfs(model.lens, model.system, rel, PsfSettings(**kw)).psf
@@ -49,7 +45,7 @@ def test_even_fine_grid_puts_a_ray_in_the_hand_computed_bin() -> None:
 
 @pytest.mark.parametrize("diffraction", ["none", "heuristic"])
 def test_even_oversampled_on_axis_psf_is_centred(oval, diffraction: str) -> None:  # noqa: ANN001
-    """The Cartesian oval's axial image is a point (tests/analysis/psf_lenses.py): with a triangular KDE and
+    """The Cartesian oval's axial image is a point (tests.helpers.oval_model): with a triangular KDE and
     o = 2 the point falls on the corner of four fine bins of the centre coarse bin, so the geometric PSF is
     all in the centre bin; with diffraction it is a centred Airy pattern (symmetric under both flips)."""
     st = compute_psfs(oval.lens, oval.system, torch.tensor([0.0], dtype=F64),

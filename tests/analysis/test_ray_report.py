@@ -6,9 +6,6 @@ at 480 nm the Cooke triplet's (0, 0.5) ray at 14° landed 30 nm away from the sa
 
 from __future__ import annotations
 
-import tomllib
-from pathlib import Path
-
 import pytest
 import torch
 
@@ -16,12 +13,11 @@ from lensopt.analysis.report import ray_report
 from lensopt.optics.bundle import trace_bundle
 from lensopt.spec import build
 from lensopt.spec.io import parse_spec
-
-COOKE = Path(__file__).resolve().parents[2] / "specs" / "cooke_triplet.toml"
+from tests.helpers import cooke_data
 
 
 def cooke(**system):
-    data = tomllib.loads(COOKE.read_text())
+    data = cooke_data()
     data["system"].update(system)
     return build(parse_spec(data))
 

@@ -22,16 +22,17 @@ from __future__ import annotations
 
 import copy
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
-from psf_lenses import oval_spec
 
 from lensopt.analysis.seidel import seidel_sums
 from lensopt.errors import LensoptError
 from lensopt.optics.paraxial import first_order
 from lensopt.spec import build, load_spec, parse_spec
+from tests.helpers import COOKE, SPECS, oval_spec
 
 pytestmark = [pytest.mark.filterwarnings("ignore::DeprecationWarning"),
               pytest.mark.filterwarnings("ignore:.*:numba.core.errors.NumbaIRAssumptionWarning")]
@@ -43,7 +44,8 @@ PEERS = ("cooke", "double_gauss", "microscope")
 def test_matches_optiland_per_surface(name: str) -> None:
     pytest.importorskip("optiland")
     from optiland.aberrations import SeidelAberrations, ThirdOrderAberrations
-    from optiland_peer import optic_from_model, peer_model
+
+    from tests.analysis.optiland_peer import optic_from_model, peer_model
 
     model = peer_model(name)
     optic = optic_from_model(model)
@@ -60,8 +62,8 @@ def test_matches_optiland_per_surface(name: str) -> None:
     np.testing.assert_allclose(-sums, s.total[:5].numpy(), rtol=1e-12, atol=0)
 
 
-def test_petzval_sum_from_curvatures_and_indices() -> None:
-    model = build(load_spec("specs/cooke_triplet.toml"))
+def test_petzval_sum_from_curvatures_and_indices(cooke) -> None:
+    model = cooke
     lens, system = model.lens, model.system
     s = seidel_sums(lens, system)
     n = lens.index[:, system.reference].tolist()
@@ -72,7 +74,7 @@ def test_petzval_sum_from_curvatures_and_indices() -> None:
     assert float(s.invariant) == pytest.approx(h, rel=1e-12)
 
 
-def _with_stop(path: str, stop: int):
+def _with_stop(path: Path, stop: int):
     spec = load_spec(path).model_dump(mode="json", exclude_none=True)
     for i, surf in enumerate(spec["surfaces"]):
         surf["stop"] = i == stop
@@ -80,9 +82,9 @@ def _with_stop(path: str, stop: int):
 
 
 @pytest.mark.parametrize("stop", [0, 1, 4, 5])
-def test_stop_shift_equations(stop: int) -> None:
-    base = build(load_spec("specs/cooke_triplet.toml"))
-    moved = _with_stop("specs/cooke_triplet.toml", stop)
+def test_stop_shift_equations(cooke, stop: int) -> None:
+    base = cooke
+    moved = _with_stop(COOKE, stop)
     from lensopt.optics.paraxial import field_tangents, trace_paraxial
 
     def chief(model):
@@ -147,8 +149,8 @@ def test_cartesian_oval_has_no_spherical_aberration() -> None:
     assert abs(s_oval) <= 1e-12 * s_sphere
 
 
-def test_waves_and_units() -> None:
-    model = build(load_spec("specs/cooke_triplet.toml"))
+def test_waves_and_units(cooke) -> None:
+    model = cooke
     s = seidel_sums(model.lens, model.system)
     lam_mm = 550e-6
     w = s.waves()
@@ -161,6 +163,6 @@ def test_waves_and_units() -> None:
 
 
 def test_diffractive_lens_is_refused() -> None:
-    model = build(load_spec("specs/hybrid_achromat.toml"))
+    model = build(load_spec(SPECS / "hybrid_achromat.toml"))
     with pytest.raises(LensoptError, match="^seidel: Seidel sums of diffractive"):
         seidel_sums(model.lens, model.system)

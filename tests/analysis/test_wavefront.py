@@ -24,7 +24,6 @@ import math
 import numpy as np
 import pytest
 import torch
-from psf_lenses import build_oval
 
 from lensopt.analysis.mtf_field import defocused
 from lensopt.analysis.seidel import seidel_sums
@@ -39,7 +38,8 @@ from lensopt.analysis.wavefront import (
 from lensopt.analysis.zernike import fit_zernike, zernike_basis, zernike_indices
 from lensopt.errors import LensoptError
 from lensopt.optics.paraxial import first_order
-from lensopt.spec import build, load_spec, parse_spec
+from lensopt.spec import build, parse_spec
+from tests.helpers import oval_model
 
 AXIS = torch.zeros(1, dtype=torch.float64)
 
@@ -57,7 +57,7 @@ def _plano_hyperbolic(epd: float = 10.0, f: float = 100.0) -> tuple:
     return build(parse_spec(spec))
 
 
-@pytest.mark.parametrize("builder", [build_oval, _plano_hyperbolic], ids=["oval", "plano-hyperbolic"])
+@pytest.mark.parametrize("builder", [oval_model, _plano_hyperbolic], ids=["oval", "plano-hyperbolic"])
 def test_perfect_conic_has_zero_opd_on_axis(builder) -> None:
     model = builder()
     wm = wavefront_map(model.lens, model.system, n=32, rel_field=AXIS)
@@ -92,7 +92,7 @@ def test_plano_convex_spherical_aberration_matches_third_order() -> None:
 
 
 def test_focus_shift_is_a_quadratic_wavefront() -> None:
-    model = build_oval(epd=4.0)
+    model = oval_model(epd=4.0)
     lens, system = model.lens, model.system
     n_img = float(lens.index[-1, 0])
     u = 1.0 / (2.0 * float(first_order(lens, system).working_fnumber))  # |u'| of the marginal ray
@@ -123,8 +123,8 @@ def test_stats_of_a_known_wavefront() -> None:
     assert abs(float((piston_only * m).sum())) <= 1e-10 * float((w.abs() * m).sum())
 
 
-def test_wavefront_stats_fields_and_shapes() -> None:
-    model = build(load_spec("specs/cooke_triplet.toml"))
+def test_wavefront_stats_fields_and_shapes(cooke) -> None:
+    model = cooke
     wm = wavefront_map(model.lens, model.system, n=24)
     assert wm.opd.shape == (3, 3, 24, 24)
     st = wavefront_stats(wm.wavefront)
@@ -174,8 +174,8 @@ def test_fit_recovers_coefficients() -> None:
     assert float(fit.residual_rms) < 1e-12
 
 
-def test_rms_wavefront_gradient_matches_finite_differences() -> None:
-    model = build(load_spec("specs/cooke_triplet.toml"))
+def test_rms_wavefront_gradient_matches_finite_differences(cooke) -> None:
+    model = cooke
     lens, system = model.lens, model.system
     pts, inside = map_grid(12, dtype=torch.float64)
     pupil = pts[inside]
@@ -195,7 +195,7 @@ def test_rms_wavefront_gradient_matches_finite_differences() -> None:
 
 
 def test_rms_wavefront_is_finite_for_a_perfect_lens_and_failed_rays() -> None:
-    model = build_oval(epd=10.0)
+    model = oval_model(epd=10.0)
     lens, system = model.lens, model.system
     pupil = torch.tensor([[0.0, 0.3], [0.5, 0.5], [0.0, 1.0], [0.0, 40.0]], dtype=torch.float64)  # last one fails
 

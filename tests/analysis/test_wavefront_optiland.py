@@ -28,11 +28,11 @@ pytest.importorskip("optiland")
 
 from optiland.distribution import create_distribution  # noqa: E402
 from optiland.wavefront import OPDFan, ZernikeOPD  # noqa: E402
-from optiland_peer import optic_from_model, peer_model  # noqa: E402
 
 from lensopt.analysis.wavefront import trace_to_sphere, wavefront  # noqa: E402
 from lensopt.analysis.zernike import fit_zernike  # noqa: E402
 from lensopt.optics.paraxial import first_order  # noqa: E402
+from tests.analysis.optiland_peer import optic_from_model, peer_model  # noqa: E402
 
 pytestmark = [pytest.mark.filterwarnings("ignore::DeprecationWarning"),
               pytest.mark.filterwarnings("ignore:.*:numba.core.errors.NumbaIRAssumptionWarning")]

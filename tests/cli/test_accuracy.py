@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import pytest
 import torch
@@ -31,16 +30,9 @@ from lensopt.qa.accuracy import (
     spot_reference,
     weighted_spot,
 )
-from lensopt.spec import build, load_spec
+from tests.helpers import COOKE
 
-ROOT = Path(__file__).resolve().parents[2]
-COOKE = ROOT / "specs" / "cooke_triplet.toml"
 runner = CliRunner()
-
-
-@pytest.fixture(scope="module")
-def cooke():
-    return build(load_spec(COOKE))
 
 
 def test_quadrature_integrates_the_half_disc_exactly() -> None:

@@ -16,16 +16,10 @@ from lensopt.cli.app import app
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling
-from lensopt.spec import build, load_spec
+from tests.helpers import COOKE
 
-COOKE = Path(__file__).resolve().parents[2] / "specs" / "cooke_triplet.toml"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 runner = CliRunner()
-
-
-@pytest.fixture(scope="module")
-def cooke():
-    return build(load_spec(COOKE))
 
 
 @pytest.fixture(scope="module")

@@ -12,14 +12,12 @@ from typer.testing import CliRunner
 
 from lensopt.analysis.mtf import lens_mtf
 from lensopt.cli.app import app
+from lensopt.design.tolerance import tolerance_job
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
-from lensopt.spec.tolerance_build import make_job
-from lensopt.tolerance.run import monte_carlo
+from lensopt.tolerance.monte_carlo import monte_carlo
+from tests.helpers import CMOUNT, COOKE
 
-ROOT = Path(__file__).resolve().parents[2]
-CMOUNT = ROOT / "lenses" / "cmount_4p.json"
-COOKE = ROOT / "specs" / "cooke_triplet.toml"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 runner = CliRunner()
 
@@ -36,7 +34,7 @@ def test_tolerance_json_equals_library_and_writes_files(tmp_path: Path) -> None:
     model = build(load_spec(CMOUNT))
     settings = ToleranceSpec.model_validate({"profile": "s6.2", "sampling": "rings:4", "trials": 12, "seed": 4,
                                              "items": [{"kind": "element_tilt_x", "limit": 1.0}]})
-    mc = monte_carlo(make_job(model, settings), 12, seed=4)
+    mc = monte_carlo(tolerance_job(model, settings), 12, seed=4)
     assert [y["value"] for y in rep["monte_carlo"]["yields"]] == [y["value"] for y in mc.yields]
     assert len(rep["tolerances"]) == 24 + 4  # S6.2 + one tilt per element
     assert {s["name"] for s in rep["sensitivity"]} == {t["name"] for t in rep["tolerances"]}
@@ -54,11 +52,11 @@ def test_tolerance_errors_are_one_line() -> None:
     assert r.exit_code == 2 and "--tolerances" in r.output
 
 
-def test_trace_json_mtf_and_plot_mtf(tmp_path: Path) -> None:
+def test_trace_json_mtf_and_plot_mtf(cooke, tmp_path: Path) -> None:
     r = runner.invoke(app, ["trace", str(COOKE), "--json", "--sampling", "rings:6", "--mtf", "10,40"])
     assert r.exit_code == 0, r.output
     rep = json.loads(r.stdout)["mtf"]
-    model = build(load_spec(COOKE))
+    model = cooke
     ref = lens_mtf(model.lens, model.system, torch.tensor([10.0, 40.0], dtype=torch.float64))
     assert np.allclose(rep["tangential"], ref.tangential.numpy(), rtol=0, atol=1e-12)
     assert np.allclose(rep["sagittal"], ref.sagittal.numpy(), rtol=0, atol=1e-12)

@@ -96,7 +96,7 @@ def _image(tmp: Path) -> Path:
 
 def json_keys(tmp: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, list[str]]:
     """The top-level keys of each command's ``--json`` output, in the order printed."""
-    from lensopt.optics import aot
+    from lensopt.accel import aot
 
     monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp / "inductor"))
 

@@ -24,10 +24,9 @@ from typer.testing import CliRunner
 
 from lensopt.cli.app import app
 from lensopt.spec import load_spec
+from tests.helpers import COOKE, COOKE_OPT
 
 ROOT = Path(__file__).resolve().parents[2]
-COOKE = ROOT / "specs" / "cooke_triplet.toml"
-COOKE_OPT = ROOT / "specs" / "cooke_triplet_opt.toml"
 runner = CliRunner()
 ENV = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
 
@@ -183,15 +182,15 @@ def test_image_and_grid_budget(tmp_path: Path) -> None:
 
 
 def test_budget_default_is_half_the_machine(monkeypatch: pytest.MonkeyPatch) -> None:
-    from lensopt import resources
+    from lensopt.cli.common import make_engine
+    from lensopt.engine import Engine, parse_size
 
     monkeypatch.delenv("LENSOPT_MAX_MEMORY", raising=False)
-    resources.set_budget(None)
     pages = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    assert resources.budget() <= 0.5 * pages + 1
-    assert resources.parse_size("1.5G") == int(1.5 * 2**30) and resources.parse_size("512M") == 512 * 2**20
-    monkeypatch.setenv("LENSOPT_MAX_MEMORY", "2K")
-    assert resources.budget() == 2048
+    assert Engine().budget <= 0.5 * pages + 1 and make_engine().budget == Engine().budget
+    assert parse_size("1.5G") == int(1.5 * 2**30) and parse_size("512M") == 512 * 2**20
+    monkeypatch.setenv("LENSOPT_MAX_MEMORY", "2K")  # read by the CLI when it makes a command's engine
+    assert make_engine().budget == 2048 and Engine().budget != 2048
 
 
 # ------------------------------------------------------------------------------------------ numbers
@@ -326,7 +325,7 @@ def test_help_imports_no_torch() -> None:
 
 def test_progress_is_plain_lines_when_not_a_terminal(tmp_path: Path) -> None:
     from lensopt.cli.optimize import LiveProgress
-    from lensopt.optim.run import Progress
+    from lensopt.optim.driver import Progress
 
     lines = []
 
@@ -423,11 +422,11 @@ def test_timeout_term_leaves_a_valid_cmount_lens(tmp_path: Path) -> None:
     _check_lens_dir(tmp_path, "x.json")
 
 
-def test_telephoto_layout_carries_its_front_aperture(tmp_path: Path) -> None:
+def test_telephoto_layout_carries_its_front_aperture(cooke, tmp_path: Path) -> None:
     from lensopt.analysis.layout import layout
     from lensopt.spec import build
 
     spec = load_spec(ROOT / "specs" / "telephoto_plastic.toml")
     fa = spec.system.front_aperture
     assert layout(build(spec), rays_per_field=3).front_aperture == (fa.distance, fa.diameter / 2)
-    assert layout(build(load_spec(COOKE)), rays_per_field=3).front_aperture is None
+    assert layout(cooke, rays_per_field=3).front_aperture is None

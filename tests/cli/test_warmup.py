@@ -10,8 +10,8 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
+from lensopt.accel import aot
 from lensopt.cli.app import app
-from lensopt.optics import aot
 
 ROOT = Path(__file__).resolve().parents[2]
 runner = CliRunner()
@@ -60,11 +60,11 @@ def test_warmup_of_a_decentered_lens_is_one_line_exit_2(tmp_path) -> None:
 def test_warmup_jacobian_builds_the_package_optimize_looks_for(tmp_path, monkeypatch) -> None:
     """``--jacobian`` keys the package like ``optimize`` builds its problem (the same spec and seed), so that
     ``optimize --jacobian compiled`` finds it; the build itself is a stand-in here (the slow test in
-    tests/optim/test_compiled_jacobian.py builds and loads a real one)."""
+    tests/accel/test_compiled_jacobian.py builds and loads a real one)."""
     import torch
 
+    from lensopt.accel import jacobian as cj
     from lensopt.design import build_problem
-    from lensopt.optim import compiled_jacobian as cj
     from lensopt.spec import load_spec
 
     monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path))

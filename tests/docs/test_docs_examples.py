@@ -5,7 +5,7 @@ The conventions of the docs, which this module checks:
 - A fenced block tagged ``sh`` holds examples. Each line that starts with ``lensopt`` (after optional
   ``NAME=value`` environment assignments) is run in-process (the console script's typer app, through
   typer's CliRunner), in page order, in one temporary folder per page. The folder holds copies of what
-  the examples read from the repository: ``specs/``, ``lenses/``, ``tests/data/``, ``tests/io/data/``,
+  the examples read from the repository: ``specs/``, ``lenses/``, ``tests/data/``, ``tests/interchange/data/``,
   ``lensopt/imaging/data/`` and ``benchmarks/tolerance/*.toml``; examples write into ``out/`` there. A line
   ending in ``\\`` continues on the next; ``> FILE`` writes the standard output to FILE; shell globs
   (``lenses/*.json``) are expanded. A trailing comment ``# exit N`` says that the example demonstrates an
@@ -37,7 +37,7 @@ from typer.testing import CliRunner
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
-INPUTS = ["specs", "lenses", "tests/data", "tests/io/data", "lensopt/imaging/data"]
+INPUTS = ["specs", "lenses", "tests/data", "tests/interchange/data", "lensopt/imaging/data"]
 PLACEHOLDER = re.compile(r"\b[A-Z][A-Z0-9_]{2,}\b")
 ENV_ASSIGNMENT = re.compile(r"^[A-Z_][A-Z0-9_]*=")
 

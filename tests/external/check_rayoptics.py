@@ -9,7 +9,7 @@ rayoptics``) and runs ``pytest tests/external/check_rayoptics.py``. Environment:
   without network access we point it to an empty stub (the comparison uses private catalogs, and
   opticalglass's vendor spreadsheets for the catalog-name check).
 
-For every lens of specs/ and tests/io/data/: EFL, BFL and the paraxial image height (≤ 1e-9 relative)
+For every lens of specs/ and tests/interchange/data/: EFL, BFL and the paraxial image height (≤ 1e-9 relative)
 and the image intercepts of lensopt's real rays traced by rayoptics (≤ 1e-9 mm). rayoptics limitations
 (see ``rayoptics_side.py``) are patched where they bite, and the unpatched numbers are reported too.
 The report goes to ``out/external/rayoptics_report.md``.

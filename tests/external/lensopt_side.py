@@ -1,4 +1,4 @@
-"""lensopt's half of the rayoptics cross-check: export every lens of specs/ (and tests/io/data/) to CODE V
+"""lensopt's half of the rayoptics cross-check: export every lens of specs/ (and tests/interchange/data/) to CODE V
 with a private catalog, and record lensopt's first-order data and real rays for comparison.
 
 Run by ``check_rayoptics.py`` in the lensopt venv; ``rayoptics_side.py`` reads what this writes.
@@ -26,7 +26,7 @@ PUPIL = "rings:6:nojitter"
 
 def lens_paths() -> list[Path]:
     """Every lens of specs/ (whatever other engineers add) and the CODE V test lenses."""
-    return sorted((ROOT / "specs").glob("*.toml")) + sorted((ROOT / "tests" / "io" / "data").glob("*.toml"))
+    return sorted((ROOT / "specs").glob("*.toml")) + sorted((ROOT / "tests" / "interchange" / "data").glob("*.toml"))
 
 
 def _image_height_at_paraxial_image(model: Any, fo: Any) -> float:

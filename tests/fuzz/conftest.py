@@ -1,3 +1,3 @@
 """Registers the fuzz tally report (see fuzz_harness.py)."""
 
-from fuzz_harness import _report  # noqa: F401
+from tests.fuzz.fuzz_harness import _report  # noqa: F401

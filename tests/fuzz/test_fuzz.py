@@ -17,9 +17,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from fuzz_harness import BASE, BASE_TEXT, fuzz_settings, invoke
 from hypothesis import given
 from hypothesis import strategies as st
+
+from tests.fuzz.fuzz_harness import BASE, BASE_TEXT, fuzz_settings, invoke
 
 COOKE = BASE  # valid input of every command: a small lens (fast), see fuzz_harness.BASE_TEXT
 COOKE_TEXT = BASE_TEXT

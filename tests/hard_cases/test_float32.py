@@ -23,8 +23,8 @@ from lensopt.optics.sampling import pupil_rings
 from lensopt.optics.trace import failure_counts
 from lensopt.spec import build, load_spec
 from lensopt.spec.models import LensSpec
+from tests.helpers import COOKE
 
-COOKE = Path(__file__).resolve().parents[2] / "specs" / "cooke_triplet.toml"
 HYBRID = Path(__file__).resolve().parents[1] / "data" / "hybrid_triplet.toml"
 
 

@@ -9,9 +9,9 @@ import math
 
 import pytest
 import torch
-from hard_tools import collimated, counts, make_lens, make_rays, trace_checked
 
 from lensopt.optics.trace import trace
+from tests.hard_cases.hard_tools import collimated, counts, make_lens, make_rays, trace_checked
 
 D = torch.float64
 GRAZE = math.radians(89.9)

@@ -14,8 +14,9 @@ import math
 import numpy as np
 import pytest
 import torch
-from hard_tools import collimated, counts, make_lens, trace_checked
 from scipy.optimize import brentq
+
+from tests.hard_cases.hard_tools import collimated, counts, make_lens, trace_checked
 
 D = torch.float64
 C = 0.1

@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from hard_tools import collimated, counts, make_lens, trace_checked
+
+from tests.hard_cases.hard_tools import collimated, counts, make_lens, trace_checked
 
 D = torch.float64
 R = 5.0

@@ -17,9 +17,9 @@ import math
 
 import pytest
 import torch
-from hard_tools import collimated, counts, make_lens, make_rays, trace_checked
 
 from lensopt.optics.trace import Rays
+from tests.hard_cases.hard_tools import collimated, counts, make_lens, make_rays, trace_checked
 
 D = torch.float64
 

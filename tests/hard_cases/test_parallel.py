@@ -7,7 +7,8 @@ from __future__ import annotations
 import math
 
 import torch
-from hard_tools import counts, make_lens, make_rays, trace_checked
+
+from tests.hard_cases.hard_tools import counts, make_lens, make_rays, trace_checked
 
 D = torch.float64
 

@@ -2,7 +2,6 @@
 that cannot converge. Each gives finite outputs, a plain reason and no exception (library and CLI)."""
 
 import json
-import tomllib
 from pathlib import Path
 
 import pytest
@@ -16,14 +15,14 @@ from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import PupilSampling
 from lensopt.optics.trace import Status
 from lensopt.spec import build, parse_spec
+from tests.helpers import cooke_data
 
-SPECS = Path(__file__).resolve().parents[2] / "specs"
 F64 = torch.float64
 RINGS = PupilSampling.parse("rings:6")
 
 
 def _cooke(**system: object) -> dict:
-    data = tomllib.loads((SPECS / "cooke_triplet.toml").read_text())
+    data = cooke_data()
     data["system"].update(system)
     return data
 

@@ -8,7 +8,8 @@ import math
 
 import numpy as np
 import torch
-from hard_tools import collimated, counts, make_lens, trace_checked
+
+from tests.hard_cases.hard_tools import collimated, counts, make_lens, trace_checked
 
 D = torch.float64
 N = 1.5

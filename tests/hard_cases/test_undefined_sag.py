@@ -10,7 +10,8 @@ import math
 
 import pytest
 import torch
-from hard_tools import collimated, counts, make_lens, trace_checked
+
+from tests.hard_cases.hard_tools import collimated, counts, make_lens, trace_checked
 
 D = torch.float64
 C, K, A4 = 0.2, 0.5, 1e-3

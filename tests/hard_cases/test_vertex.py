@@ -12,9 +12,9 @@ import dataclasses
 import math
 
 import torch
-from hard_tools import LENS_TENSORS, counts, make_lens, make_rays, trace_checked
 
 from lensopt.optics.trace import Rays, trace
+from tests.hard_cases.hard_tools import LENS_TENSORS, counts, make_lens, make_rays, trace_checked
 
 D = torch.float64
 N = 1.6

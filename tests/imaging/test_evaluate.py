@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from imaging_lenses import oval_model
 from typer.testing import CliRunner
 
 from lensopt.cli.app import app
@@ -18,9 +17,9 @@ from lensopt.imaging.evaluate import evaluate, scene_source
 from lensopt.imaging.io import ImageInfo, write_image
 from lensopt.imaging.plan import PlanOptions
 from lensopt.spec import build, camera_of, load_spec
+from tests.helpers import CMOUNT, imaging_oval
 
 ROOT = Path(__file__).resolve().parents[2]
-CMOUNT = ROOT / "lenses" / "cmount_4p.json"
 runner = CliRunner()
 
 
@@ -30,11 +29,11 @@ def _png(path: Path, h: int, w: int, seed: int = 0) -> None:
 
 
 def test_delta_psf_lens_scores_perfectly_and_every_tile_once() -> None:
-    # The Cartesian oval images a point to a point at its one wavelength (imaging_lenses.oval_model):
+    # The Cartesian oval images a point to a point at its one wavelength (tests.helpers.imaging_oval):
     # pass-through, so every capture equals its scene (PSNR ∞, SSIM 1); its one wavelength feeds R, G and B
     # (the S4.1.2 rule with n_w = 1). 64×48 sensor, 16 px tiles → 4×3 = 12 tiles; 12 scenes use each
     # tile exactly once.
-    camera = camera_of(oval_model(pitch_um=30.0, resolution=(64, 48)))
+    camera = camera_of(imaging_oval(pitch_um=30.0, resolution=(64, 48)))
     scenes, names, _ = scene_source(None, count=12, patch=16, seed=1)
     ev = evaluate(camera, scenes, names, patch=16, seed=1, options=PlanOptions(sampling="rings:4"))
     assert ev.tiles == 12 and ev.count == 12
@@ -43,7 +42,7 @@ def test_delta_psf_lens_scores_perfectly_and_every_tile_once() -> None:
 
 
 def test_noise_is_seeded_and_costs_psnr() -> None:
-    camera = camera_of(oval_model(pitch_um=30.0, resolution=(64, 48)))
+    camera = camera_of(imaging_oval(pitch_um=30.0, resolution=(64, 48)))
     scenes, names, _ = scene_source(None, count=4, patch=16, seed=1)
     runs = [evaluate(camera, scenes, names, patch=16, seed=1, noise_sigma=0.01, options=PlanOptions(sampling="rings:4"))
             for _ in range(2)]

@@ -10,23 +10,22 @@ import torch
 from typer.testing import CliRunner
 
 from lensopt.cli.app import app
+from tests.helpers import CMOUNT
 
 ROOT = Path(__file__).resolve().parents[2]
-CMOUNT = ROOT / "lenses" / "cmount_4p.json"
 SMALL = ["--count", "2", "--patch", "64", "--rays", "rings:4", "--json"]
 runner = CliRunner()
 
 
 def _spy(monkeypatch: pytest.MonkeyPatch) -> list[dict]:
-    """Record the trace backend in force and the camera's device when the library's evaluate runs."""
+    """Record the trace backend of the engine and the camera's device the library's evaluate is given."""
     import lensopt.imaging.evaluate as ev
-    from lensopt.optics.backend import current_backend
 
     seen: list[dict] = []
     real = ev.evaluate
 
     def spy(camera, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
-        seen.append({"backend": current_backend(), "device": str(camera.lens.device)})
+        seen.append({"backend": kwargs["engine"].backend, "device": str(camera.lens.device)})
         return real(camera, *args, **kwargs)
 
     monkeypatch.setattr(ev, "evaluate", spy)

@@ -3,8 +3,6 @@ identical to the per-scene path, which recomputes every scene's PSFs as ``lensop
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import torch
 
@@ -13,9 +11,7 @@ from lensopt.imaging.plan import Effects, PlanOptions
 from lensopt.imaging.regions import tile_grid
 from lensopt.imaging.simulate import PsfCache, plan_scene, run_plan, sensor_of
 from lensopt.spec import build, camera_of, load_spec
-
-ROOT = Path(__file__).resolve().parents[2]
-CMOUNT = ROOT / "lenses" / "cmount_4p.json"
+from tests.helpers import CMOUNT
 
 
 def test_reused_psfs_give_the_per_scene_scores_exactly() -> None:

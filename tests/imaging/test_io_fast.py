@@ -146,14 +146,14 @@ def test_convolution_without_autograd_equals_the_differentiable_path(monkeypatch
     assert psfs.grad[1, 2, 0, 3, 3].item() == pytest.approx(((hi - lo) / (2 * eps)).item(), rel=1e-6)
 
 
-def test_run_plan_leaves_the_callers_image_alone() -> None:
+def test_run_plan_leaves_the_callers_image_alone(cooke) -> None:
     from lensopt.imaging.plan import PlanOptions, parse_effects
     from lensopt.imaging.simulate import plan_scene, run_plan
-    from lensopt.spec import build, camera_of, load_spec
+    from lensopt.spec import camera_of
 
     img, info = read_image(EXAMPLE)
     keep = img.copy()
-    camera = camera_of(build(load_spec(ROOT / "specs" / "cooke_triplet.toml")))
+    camera = camera_of(cooke)
     meta = {"width": info.width, "height": info.height, "channels": 3}
     for effects in ("-convolution,-noise", "+convolution,-noise"):
         opts = PlanOptions(sampling="rings:4")
@@ -214,15 +214,15 @@ def test_scores_with_a_transform_equal_scores_of_the_transformed_images() -> Non
     assert psnr(a, c, transform=linear_to_srgb) == float("inf")
 
 
-def test_effects_in_bands_equal_one_whole_image_band(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_effects_in_bands_equal_one_whole_image_band(cooke, monkeypatch: pytest.MonkeyPatch) -> None:
     # One band covering the image is the whole-image computation that the effects did before.
     import lensopt.imaging.effects as effects
     from lensopt.imaging.pilot import run_pilot
     from lensopt.imaging.scene import parse_region
     from lensopt.imaging.simulate import sensor_of
-    from lensopt.spec import build, camera_of, load_spec
+    from lensopt.spec import camera_of
 
-    camera = camera_of(build(load_spec(ROOT / "specs" / "cooke_triplet.toml")))
+    camera = camera_of(cooke)
     img = torch.from_numpy(np.random.default_rng(11).random((3, 45, 61), dtype=np.float32))
     sensor, _ = sensor_of(camera, 61, 45)
     region = parse_region("corner", sensor, 61, 45)

@@ -6,20 +6,15 @@ import math
 from pathlib import Path
 
 import pytest
-from imaging_lenses import oval_model
 
 from lensopt.errors import LensoptError
 from lensopt.imaging.plan import PlanOptions, parse_effects
 from lensopt.imaging.scene import parse_region
 from lensopt.imaging.simulate import plan_scene
 from lensopt.spec import build, camera_of, load_spec
+from tests.helpers import imaging_oval
 
 SPECS = Path(__file__).resolve().parents[2] / "specs"
-
-
-@pytest.fixture(scope="module")
-def cooke():
-    return build(load_spec(SPECS / "cooke_triplet.toml"))
 
 
 def plan_for(model, w: int, h: int, channels: int, region: str | None = None, effects: str | None = None,
@@ -55,7 +50,7 @@ def test_centre_crop_traces_no_corner_field(cooke) -> None:
 
 
 def test_pass_through_when_the_psf_is_within_a_pixel() -> None:
-    p = plan_for(oval_model(pitch_um=30.0), 64, 48, 1)
+    p = plan_for(imaging_oval(pitch_um=30.0), 64, 48, 1)
     assert p["effects"]["convolution"]["on"] is False
     assert "pass-through" in p["effects"]["convolution"]["reason"]
     assert p["psf_grid"] is None and p["fields_deg"] == []

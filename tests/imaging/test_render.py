@@ -4,7 +4,6 @@ the same region and settings, uniform scenes stay uniform, gradients match centr
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,18 +17,11 @@ from lensopt.imaging.scene import Region, Sensor
 from lensopt.imaging.simulate import plan_scene, run_plan
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling
-from lensopt.spec import build, load_spec
-
-SPECS = Path(__file__).resolve().parents[2] / "specs"
-
-
-def _cooke():
-    return build(load_spec(SPECS / "cooke_triplet.toml"))
 
 
 @pytest.mark.parametrize("region", ["corner", "tile:20,5/32x24"])
-def test_rendered_patch_equals_lensopt_simulate(region: str) -> None:
-    model = _cooke()
+def test_rendered_patch_equals_lensopt_simulate(cooke, region: str) -> None:
+    model = cooke
     img = np.random.default_rng(1).random((40, 40, 3), dtype=np.float32)
     options = PlanOptions(sampling="rings:8", grid=(3, 3))
     plan, pilot, reg, sensor = plan_scene(model, {"width": 40, "height": 40, "channels": 3}, region=region,
@@ -58,8 +50,8 @@ def test_rendered_patch_equals_lensopt_simulate(region: str) -> None:
     torch.testing.assert_close(out[0], ref, rtol=0, atol=1e-6)  # float32 rounding
 
 
-def test_uniform_white_stays_uniform_away_from_the_borders() -> None:
-    model = _cooke()
+def test_uniform_white_stays_uniform_away_from_the_borders(cooke) -> None:
+    model = cooke
     sensor = Sensor(model.spec.sensor.pixel_pitch_um * 1e-3, 320, 240)
     regs = [Region(0.0, 0.0, 64, 64, 64, 64, "corner"), Region(128.0, 88.0, 64, 64, 64, 64, "centre")]
     white = torch.ones(2, 3, 64, 64)
@@ -71,8 +63,8 @@ def test_uniform_white_stays_uniform_away_from_the_borders() -> None:
     assert float((inner - 1.0).abs().max()) < 1e-5
 
 
-def test_gradient_wrt_a_curvature_equals_central_differences() -> None:
-    model = _cooke()
+def test_gradient_wrt_a_curvature_equals_central_differences(cooke) -> None:
+    model = cooke
     sensor = Sensor(model.spec.sensor.pixel_pitch_um * 1e-3, 320, 240)
     regs = [Region(250.0, 10.0, 24, 24, 24, 24, "edge")]
     scene = torch.rand(1, 3, 24, 24, generator=torch.Generator().manual_seed(0), dtype=torch.float64)

@@ -6,13 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from imaging_lenses import oval_model
 
 from lensopt.imaging.plan import PlanOptions, parse_effects
 from lensopt.imaging.simulate import plan_scene, run_plan
-from lensopt.spec import build, camera_of, load_spec
-
-SPECS = Path(__file__).resolve().parents[2] / "specs"
+from lensopt.spec import camera_of
+from tests.helpers import imaging_oval
 
 
 def simulate(model, img: np.ndarray, region: str | None = None, effects: str | None = None, **opts):
@@ -29,7 +27,7 @@ def scene(h: int, w: int, c: int, seed: int = 0) -> np.ndarray:
 
 def test_pass_through_returns_the_image_untouched() -> None:
     img = scene(48, 64, 3)
-    plan, res = simulate(oval_model(rgb=True, pitch_um=60.0), img)
+    plan, res = simulate(imaging_oval(rgb=True, pitch_um=60.0), img)
     assert plan.effects["convolution"]["on"] is False
     assert res.psf_grid is None and np.array_equal(res.image, img)
 
@@ -37,14 +35,13 @@ def test_pass_through_returns_the_image_untouched() -> None:
 def test_delta_psf_lens_leaves_the_image_unchanged_when_forced_to_convolve() -> None:
     # The oval's PSFs are Dirac deltas at 30 µm pixels (Airy radius 10.8 µm < half a pixel: no diffraction).
     img = scene(48, 64, 1)
-    plan, res = simulate(oval_model(), img, effects="+convolution", grid=(3, 2))
+    plan, res = simulate(imaging_oval(), img, effects="+convolution", grid=(3, 2))
     assert plan.effects["convolution"]["on"] and not plan.diffraction["on"]
     assert res.psf_grid.shape[:3] == (2, 3, 1)
     assert np.abs(res.image - img).max() < 1e-5
 
 
-def test_grayscale_scene_computes_one_channel(tmp_path: Path) -> None:
-    cooke = build(load_spec(SPECS / "cooke_triplet.toml"))
+def test_grayscale_scene_computes_one_channel(cooke, tmp_path: Path) -> None:
     img = scene(50, 50, 1)  # one 125 × 125 sensor-pixel tile of a 32 × 24 grid (seed S3.3.1), in a corner
     plan, res = simulate(cooke, img, region="tile:31,0/32x24")
     assert plan.channels == ["Y"]
@@ -52,8 +49,7 @@ def test_grayscale_scene_computes_one_channel(tmp_path: Path) -> None:
     assert res.psf_grid.shape[2] == 1 and res.image.shape == (50, 50, 1)
 
 
-def test_uniform_scene_stays_uniform_through_a_real_lens() -> None:
-    cooke = build(load_spec(SPECS / "cooke_triplet.toml"))
+def test_uniform_scene_stays_uniform_through_a_real_lens(cooke) -> None:
     img = np.full((60, 80, 3), 0.4, dtype=np.float32)
     plan, res = simulate(cooke, img, region="corner", grid=(4, 3))
     assert plan.effects["convolution"]["on"]
@@ -62,7 +58,7 @@ def test_uniform_scene_stays_uniform_through_a_real_lens() -> None:
 
 def test_noise_is_seeded_and_scaled() -> None:
     img = np.full((64, 64, 1), 0.5, dtype=np.float32)
-    model = oval_model()
+    model = imaging_oval()
     _, a = simulate(model, img, effects="noise=0.02")
     _, b = simulate(model, img, effects="noise=0.02")
     _, c = simulate(model, img, effects="noise=0.02", seed=1)
@@ -70,8 +66,7 @@ def test_noise_is_seeded_and_scaled() -> None:
     assert float(np.std(a.image - img)) == pytest.approx(0.02 * 0.5, rel=0.05)
 
 
-def test_relative_illumination_and_distortion_effects() -> None:
-    cooke = build(load_spec(SPECS / "cooke_triplet.toml"))
+def test_relative_illumination_and_distortion_effects(cooke) -> None:
     img = np.full((30, 40, 1), 1.0, dtype=np.float32)
     plan, res = simulate(cooke, img, region="corner", effects="-convolution,ri")
     ri = plan.effects["relative_illumination"]
@@ -83,9 +78,9 @@ def test_relative_illumination_and_distortion_effects() -> None:
     assert np.isfinite(res.image).all()
 
 
-def test_a_built_model_or_its_camera_give_the_same_image() -> None:
+def test_a_built_model_or_its_camera_give_the_same_image(cooke) -> None:
     # The core takes a plain Camera; a built model is accepted through model.camera() (no spec import below).
-    model = build(load_spec(SPECS / "cooke_triplet.toml"))
+    model = cooke
     img = scene(24, 32, 3)
     a = simulate(model, img, region="corner")[1].image
     b = simulate(camera_of(model), img, region="corner")[1].image

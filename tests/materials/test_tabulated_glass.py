@@ -2,17 +2,13 @@
 
 from __future__ import annotations
 
-import tomllib
-from pathlib import Path
-
 import pytest
 import torch
 
 from lensopt.errors import MaterialError, SpecError
 from lensopt.materials import TabulatedGlass
 from lensopt.spec import build, parse_spec
-
-SPECS = Path(__file__).resolve().parents[2] / "specs"
+from tests.helpers import cooke_data
 
 
 def _cubic(w: float) -> float:
@@ -62,7 +58,7 @@ def test_bad_tables_are_rejected(wl: tuple[float, ...], n: tuple[float, ...]) ->
 
 
 def _cooke_with(material: object) -> dict:
-    data = tomllib.loads((SPECS / "cooke_triplet.toml").read_text())
+    data = cooke_data()
     data["surfaces"][0]["material"] = material
     return data
 

@@ -3,20 +3,15 @@ real aperture stop. Checked by re-tracing the aimed rays to the stop with the pl
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import torch
 
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.trace import trace
-from lensopt.spec import build, load_spec
-
-COOKE = Path(__file__).resolve().parents[2] / "specs" / "cooke_triplet.toml"
 
 
-def test_chief_ray_hits_stop_centre_on_cooke_triplet_at_20_degrees() -> None:
-    model = build(load_spec(COOKE))
+def test_chief_ray_hits_stop_centre_on_cooke_triplet_at_20_degrees(cooke) -> None:
+    model = cooke
     lens, system = model.lens, model.system
     rel = torch.tensor([0.7, 1.0], dtype=lens.dtype)  # 14° and 20° (HFOV = 20°)
     bundle = trace_bundle(lens, system, torch.zeros(1, 2, dtype=lens.dtype), rel_field=rel, aim="chief")
@@ -38,8 +33,8 @@ def test_chief_ray_hits_stop_centre_on_cooke_triplet_at_20_degrees() -> None:
     assert float(y_plain[1].abs().min()) > 1e-3
 
 
-def test_aiming_offsets_are_zero_on_axis_and_follow_the_system() -> None:
-    model = build(load_spec(COOKE))
+def test_aiming_offsets_are_zero_on_axis_and_follow_the_system(cooke) -> None:
+    model = cooke
     lens, system = model.lens, model.system
     fo = first_order(lens, system)
     bundle = trace_bundle(lens, system, torch.zeros(1, 2, dtype=lens.dtype), aim="chief", fo=fo)

@@ -1,8 +1,6 @@
 """Clear apertures that clip (``clip = true``): rays outside the semi-diameter fail with their own
 reason, and exactly the rays a single-ray bisection predicts are kept."""
 
-import tomllib
-from pathlib import Path
 
 import torch
 
@@ -10,14 +8,14 @@ from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import launch, pupil_grid
 from lensopt.optics.trace import REASONS, Status, failure_counts, trace
 from lensopt.spec import build, parse_spec
+from tests.helpers import cooke_data
 
-SPECS = Path(__file__).resolve().parents[2] / "specs"
 F64 = torch.float64
 STOP_SD = 3.0  # the Cooke triplet's axial beam is ~4.7 mm high on its stop (surface 3)
 
 
 def _cooke_clipped() -> dict:
-    data = tomllib.loads((SPECS / "cooke_triplet.toml").read_text())
+    data = cooke_data()
     data["surfaces"][2].update(semi_diameter=STOP_SD, clip=True)
     return data
 

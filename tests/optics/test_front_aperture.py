@@ -21,6 +21,7 @@ from lensopt.optics.sampling import launch, pupil_grid
 from lensopt.optics.trace import Status, trace
 from lensopt.optics.vignetting import clip_ellipse_to_disc, front_aperture_disc
 from lensopt.spec import Model, build, parse_spec
+from tests.helpers import cooke_data
 
 SPEC = Path(__file__).resolve().parents[2] / "specs" / "telephoto_plastic.toml"
 F64 = torch.float64
@@ -177,7 +178,7 @@ def test_bundle_statistics_are_differentiable_through_aiming_and_the_aperture() 
     from lensopt.analysis.spot import spot_stats
     from lensopt.optics.sampling import PupilSampling
 
-    data = tomllib.loads((SPEC.parent / "cooke_triplet.toml").read_text())
+    data = cooke_data()
     data["system"].update(aim="full", aim_steps=4, front_aperture={"distance": -10.0, "diameter": 12.0})
     m = build(parse_spec(data))
     lens, system = m.lens, m.system

@@ -12,11 +12,10 @@ import torch
 
 # MIXED: every code path of the trace (Newton, spheres, a hyperboloid, clipping, a diffractive surface,
 # TIR, misses, Newton failures), shared with the compiled-trace tests.
-from test_compiled_trace import MIXED
-
 from lensopt.optics import trace as trace_mod
 from lensopt.optics.trace import REASONS, Rays, trace
 from lensopt.spec import build, parse_spec
+from tests.helpers import MIXED
 
 SPHERES = {  # all rays pass: the shortcut branches (every select's condition true) are taken
     "name": "doublet",

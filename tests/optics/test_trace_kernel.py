@@ -13,22 +13,17 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
-from pathlib import Path
 
 import pytest
 import torch
 
-from lensopt.optics.compiled import near_only_surfaces
+from lensopt.accel.compiled import near_only_surfaces
 from lensopt.optics.intersect import quadric_flag_xyz, quadric_near_xyz
 from lensopt.optics.trace import KernelOptions, Rays, Status, trace, trace_kernel
 from lensopt.spec import build, parse_spec
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "hard_cases"))
-from hard_tools import make_lens  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from test_compiled_trace import MIXED, _rays  # noqa: E402
+from tests.hard_cases.hard_tools import make_lens
+from tests.helpers import MIXED
+from tests.helpers import mixed_rays as _rays
 
 D = torch.float64
 

@@ -1,7 +1,5 @@
 """Vignetting factors reshape the pupil (S19–S20 with the seed text's sign, = CODE V VLY/VUY/VUX)."""
 
-import tomllib
-from pathlib import Path
 
 import pytest
 import torch
@@ -10,8 +8,7 @@ from lensopt.errors import SpecError
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.vignetting import apply_vignetting
 from lensopt.spec import build, parse_spec
-
-SPECS = Path(__file__).resolve().parents[2] / "specs"
+from tests.helpers import cooke_data
 
 
 @pytest.mark.parametrize(("v_i", "v_s", "v_l"), [(0.0, 0.0, 0.0), (0.3, 0.0, 0.1), (0.2, 0.4, 0.25), (1.0, 0.0, 0.0)])
@@ -29,7 +26,7 @@ def test_pupil_edges_move_by_the_blocked_fractions(v_i: float, v_s: float, v_l: 
 
 
 def _cooke(vig: dict | None) -> dict:
-    data = tomllib.loads((SPECS / "cooke_triplet.toml").read_text())
+    data = cooke_data()
     if vig is not None:
         data["system"]["vignetting"] = vig
     return data

@@ -8,7 +8,7 @@ import torch
 
 from lensopt.design import build_problem, optimize
 from lensopt.optim import OptimizeError, Problem
-from lensopt.optim.run import make_optimizer
+from lensopt.optim.driver import make_optimizer
 from lensopt.spec import parse_spec
 
 

@@ -16,9 +16,9 @@ from lensopt.optim.terms import TERMS, Term
 from lensopt.spec import parse_spec
 
 
-def test_the_rows_follow_the_order_of_terms(cooke) -> None:  # noqa: ANN001
-    cooke["surfaces"][0]["vary"] = ["radius"]
-    p = build_problem(parse_spec(cooke))
+def test_the_rows_follow_the_order_of_terms(cooke_opt) -> None:  # noqa: ANN001
+    cooke_opt["surfaces"][0]["vary"] = ["radius"]
+    p = build_problem(parse_spec(cooke_opt))
     order = [t.name for t in TERMS]
     names = list(p.slices)
     assert names == sorted(names, key=order.index)
@@ -33,9 +33,9 @@ def test_the_order_does_not_depend_on_imports() -> None:
     assert out == ",".join(t.name for t in TERMS)
 
 
-def test_a_term_joins_the_residuals_with_its_weight(cooke, monkeypatch: pytest.MonkeyPatch) -> None:  # noqa: ANN001
-    cooke["surfaces"][0]["vary"] = ["radius"]
-    spec = parse_spec(cooke)
+def test_a_term_joins_the_residuals_with_its_weight(cooke_opt, monkeypatch: pytest.MonkeyPatch) -> None:  # noqa: ANN001
+    cooke_opt["surfaces"][0]["vary"] = ["radius"]
+    spec = parse_spec(cooke_opt)
     base = build_problem(spec)
     extra = Term("centre_height", "test: y of each field's centroid", lambda s: 3.0, lambda c: c.stats.centroid[:, 1])
     monkeypatch.setattr(problem_module, "TERMS", (TERMS[0], extra, *TERMS[1:]))

@@ -36,9 +36,9 @@ def test_theta_holds_the_seed_scalings(make_cooke) -> None:  # noqa: ANN001
     torch.testing.assert_close(p.theta0, expected, rtol=1e-15, atol=0)
 
 
-def test_alpha_defaults_to_half_the_epd(cooke: dict) -> None:
-    cooke["surfaces"][0]["vary"] = ["radius"]
-    assert build_problem(parse_spec(cooke)).alpha == pytest.approx(5.0)  # EPD 10 mm
+def test_alpha_defaults_to_half_the_epd(cooke_opt: dict) -> None:
+    cooke_opt["surfaces"][0]["vary"] = ["radius"]
+    assert build_problem(parse_spec(cooke_opt)).alpha == pytest.approx(5.0)  # EPD 10 mm
 
 
 def test_bernstein_to_monomial_degree_two() -> None:
@@ -71,10 +71,10 @@ def test_bezier_control_points_are_sag_shape_of_the_asphere(make_cooke) -> None:
     assert float(b[-1]) == pytest.approx(sum(c * a**k for k, c in coeff.items()), rel=1e-12)
 
 
-def test_spec_round_trip_after_a_change(cooke: dict) -> None:
-    cooke["surfaces"][2]["vary"] = ["radius"]
-    cooke["surfaces"][3]["vary"] = ["thickness"]
-    p = build_problem(parse_spec(cooke))
+def test_spec_round_trip_after_a_change(cooke_opt: dict) -> None:
+    cooke_opt["surfaces"][2]["vary"] = ["radius"]
+    cooke_opt["surfaces"][3]["vary"] = ["thickness"]
+    p = build_problem(parse_spec(cooke_opt))
     theta = p.theta0 + torch.tensor([0.01, -0.02], dtype=torch.float64)
     spec = to_spec(p, theta)
     assert spec.surfaces[2].radius == pytest.approx(p.alpha / float(theta[0]), rel=1e-14)
@@ -83,10 +83,10 @@ def test_spec_round_trip_after_a_change(cooke: dict) -> None:
     torch.testing.assert_close(again.theta0, theta, rtol=1e-14, atol=0)
 
 
-def test_varied_glass_starts_at_its_catalog_values(cooke: dict) -> None:
-    cooke["surfaces"][2]["vary"] = ["material"]
-    cooke["optimize"]["catalog"] = "schott-preferred"
-    p = build_problem(parse_spec(cooke))
+def test_varied_glass_starts_at_its_catalog_values(cooke_opt: dict) -> None:
+    cooke_opt["surfaces"][2]["vary"] = ["material"]
+    cooke_opt["optimize"]["catalog"] = "schott-preferred"
+    p = build_problem(parse_spec(cooke_opt))
     nd, vd, dpgf = p.param.glass_physical(p.theta0)[0].tolist()
     # F2 (Schott): nd 1.62004, vd 36.37 (catalog).
     assert nd == pytest.approx(1.62004, abs=1e-5)
@@ -94,11 +94,11 @@ def test_varied_glass_starts_at_its_catalog_values(cooke: dict) -> None:
     assert math.isfinite(dpgf)
 
 
-def test_bad_variables_name_the_field(cooke: dict) -> None:
-    cooke["surfaces"][1]["vary"] = ["material"]  # surfaces[1] is followed by air
+def test_bad_variables_name_the_field(cooke_opt: dict) -> None:
+    cooke_opt["surfaces"][1]["vary"] = ["material"]  # surfaces[1] is followed by air
     with pytest.raises(SpecError, match=r"surfaces\[1\]\.vary: air cannot vary"):
-        build_problem(parse_spec(cooke))
-    cooke["surfaces"][1]["vary"] = ["radius"]
-    cooke["optimize"]["solves"] = [{"type": "efl", "surface": 1, "value": 50.0}]
+        build_problem(parse_spec(cooke_opt))
+    cooke_opt["surfaces"][1]["vary"] = ["radius"]
+    cooke_opt["optimize"]["solves"] = [{"type": "efl", "surface": 1, "value": 50.0}]
     with pytest.raises(SpecError, match=r"surfaces\[1\]\.vary: radius is set by a solve"):
-        build_problem(parse_spec(cooke))
+        build_problem(parse_spec(cooke_opt))

@@ -12,7 +12,7 @@ import torch
 
 from lensopt.analysis.wavefront import map_grid, rms_wavefront_error
 from lensopt.design import build_problem
-from lensopt.optim.run import make_optimizer
+from lensopt.optim.driver import make_optimizer
 from lensopt.spec import parse_spec
 
 SPECS = Path(__file__).resolve().parents[2] / "specs"

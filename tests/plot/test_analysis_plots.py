@@ -4,10 +4,8 @@ leave gaps where rays failed, and write files."""
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
-import pytest
 import torch
 from matplotlib.figure import Figure
 
@@ -24,15 +22,8 @@ from lensopt.plot.opd import opd_fans_figure
 from lensopt.plot.style import save_figure
 from lensopt.plot.through_focus import through_focus_figure
 from lensopt.plot.wavefront import wavefront_figure
-from lensopt.spec import build, load_spec
 
-COOKE = Path(__file__).resolve().parents[2] / "specs" / "cooke_triplet.toml"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-
-
-@pytest.fixture(scope="module")
-def cooke():
-    return build(load_spec(COOKE))
 
 
 def _lines(ax) -> list[np.ndarray]:

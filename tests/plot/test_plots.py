@@ -4,7 +4,6 @@ rays), files are written atomically."""
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -19,22 +18,17 @@ from lensopt.analysis.spot_diagram import spot_diagram
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import PupilSampling
 from lensopt.plot import plot_fans, plot_layout, plot_spots, save_figure, wavelength_color
-from lensopt.spec import build, load_spec
+from lensopt.spec import build
 from lensopt.spec.io import parse_spec
+from tests.helpers import cooke_data
 
-COOKE = Path(__file__).resolve().parents[2] / "specs" / "cooke_triplet.toml"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-
-
-@pytest.fixture(scope="module")
-def cooke():
-    return build(load_spec(COOKE))
 
 
 @pytest.fixture(scope="module")
 def vignetted():
     """EPD 12 mm with surface 5 clipped at 6 mm: the upper off-axis rays are lost at surface 5."""
-    data = tomllib.loads(COOKE.read_text())
+    data = cooke_data()
     data["system"]["aperture"] = {"epd": 12.0}
     data["surfaces"][4].update(semi_diameter=6.0, clip=True)
     return build(parse_spec(data))

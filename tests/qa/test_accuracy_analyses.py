@@ -4,20 +4,8 @@ sampling error, and the rows come out of ``run_accuracy`` like the others."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
-import pytest
-
 from lensopt.qa.accuracy import ANALYSES, DEFAULT_KNOBS, KNOBS, METRICS, run_accuracy
 from lensopt.qa.accuracy_analyses import ANALYSIS_KNOBS, analysis_points
-from lensopt.spec import build, load_spec
-
-COOKE = Path(__file__).resolve().parents[2] / "specs" / "cooke_triplet.toml"
-
-
-@pytest.fixture(scope="module")
-def cooke():
-    return build(load_spec(COOKE))
 
 
 def test_every_analysis_has_a_knob_and_a_metric() -> None:

@@ -3,12 +3,11 @@
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.helpers import cooke_data
 
 TINY_RESTORE = {"width": 4, "encoder_blocks": [1, 1], "middle_blocks": 1, "decoder_blocks": [1, 1],
                 "train": {"batch": 2, "patch": 32, "steps": 4, "checkpoint_every": 2, "validate_every": 2,
@@ -25,7 +24,7 @@ def write_spec(path: Path, data: dict) -> Path:
 @pytest.fixture
 def tiny_lens(tmp_path: Path) -> Path:
     """cooke_triplet.toml + a tiny [restore] section, as a JSON lens file."""
-    data = tomllib.loads((ROOT / "specs" / "cooke_triplet.toml").read_text())
+    data = cooke_data()
     data["sensor"]["resolution"] = [640, 480]
     data["restore"] = TINY_RESTORE
     return write_spec(tmp_path / "tiny.json", data)
@@ -34,7 +33,7 @@ def tiny_lens(tmp_path: Path) -> Path:
 @pytest.fixture
 def other_lens(tmp_path: Path) -> Path:
     """The same with a conic first surface: another lens structure."""
-    data = tomllib.loads((ROOT / "specs" / "cooke_triplet.toml").read_text())
+    data = cooke_data()
     data["sensor"]["resolution"] = [640, 480]
     data["restore"] = TINY_RESTORE
     data["surfaces"][0]["type"] = "conic"

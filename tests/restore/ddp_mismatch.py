@@ -7,7 +7,8 @@ import torch
 from lensopt.errors import LensoptError
 from lensopt.parallel import check_same_settings, init_distributed
 
-rank, world, _ = init_distributed(torch.device("cpu"))
+dist = init_distributed(torch.device("cpu"))
+rank, world = dist.rank, dist.world
 try:
     check_same_settings(world, {"steps": 3 + rank})
 except LensoptError as err:

@@ -3,15 +3,13 @@
 from __future__ import annotations
 
 import copy
-import tomllib
-from pathlib import Path
 from typing import Any
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.helpers import cooke_data
 
 
 def joint_data(*, batch: int = 2, noise: float = 0.005, steps: int = 3, psf_size: int = 9) -> dict[str, Any]:
-    data = tomllib.loads((ROOT / "specs" / "cooke_triplet.toml").read_text())
+    data = cooke_data()
     data["sensor"]["resolution"] = [640, 480]
     data["surfaces"][0]["vary"] = ["radius"]
     data["surfaces"][2]["vary"] = ["radius"]

@@ -99,10 +99,10 @@ def test_resume_is_bit_identical(tiny_lens: Path, tmp_path: Path) -> None:
     assert full.exit_code == 0, full.output
     # An interrupted run: SIGTERM during step 3 stops it at the step boundary with a checkpoint (exit 143).
     part = tmp_path / "part"
-    from lensopt.optim import irm
+    from lensopt.restore import train as training
 
     calls = {"n": 0}
-    orig = irm.network_step
+    orig = training.network_step
 
     def term_during_third(*a, **k):  # noqa: ANN002, ANN003
         calls["n"] += 1
@@ -110,11 +110,11 @@ def test_resume_is_bit_identical(tiny_lens: Path, tmp_path: Path) -> None:
             os.kill(os.getpid(), signal.SIGTERM)
         return orig(*a, **k)
 
-    irm.network_step = term_during_third
+    training.network_step = term_during_third
     try:
         r = _train(tiny_lens, part, "--steps", "4", "--checkpoint-every", "0")
     finally:
-        irm.network_step = orig
+        training.network_step = orig
     assert r.exit_code == 143, r.output
     assert load_checkpoint(part).step == 3
     res = _train(tiny_lens, part, "--steps", "4", "--resume")
@@ -175,10 +175,10 @@ def test_restore_command(tiny_lens: Path, other_lens: Path, tmp_path: Path) -> N
 def _identity_checkpoint(lens: Path, out: Path) -> None:
     """A checkpoint holding a fresh (identity) network for ``lens``, written through the library."""
     from lensopt.checkpoint import Checkpoint, save_checkpoint
-    from lensopt.optim.irm_run import network_fingerprint
+    from lensopt.design.restore import configs_from_spec
     from lensopt.restore import ConditionedRestorer
+    from lensopt.restore.checkpoint import network_fingerprint
     from lensopt.spec import dump_json, load_spec
-    from lensopt.spec.restore import configs_from_spec
 
     spec = load_spec(lens)
     net_cfg, _ = configs_from_spec(spec.restore)

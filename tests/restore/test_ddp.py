@@ -13,8 +13,7 @@ import pytest
 import torch
 
 from lensopt.checkpoint import load_checkpoint
-
-from .joint_spec import joint_data
+from tests.restore.joint_spec import joint_data
 
 ROOT = Path(__file__).resolve().parents[2]
 TORCHRUN = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2"]

@@ -15,14 +15,13 @@ from typer.testing import CliRunner
 from lensopt.checkpoint import load_checkpoint
 from lensopt.cli.app import app
 from lensopt.design import build_problem
+from lensopt.design.joint import RestoredObjective
 from lensopt.design.joint_run import run_joint
 from lensopt.optim import Problem
 from lensopt.optim.gtra import gtra_residual
-from lensopt.optim.joint import RestoredObjective
 from lensopt.restore import ConditionedRestorer, RestoreConfig
 from lensopt.spec import parse_spec
-
-from .joint_spec import joint_data
+from tests.restore.joint_spec import joint_data
 
 TINY = RestoreConfig(width=4, encoder_blocks=(1, 1), middle_blocks=1, decoder_blocks=(1, 1))
 

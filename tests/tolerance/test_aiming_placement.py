@@ -23,6 +23,7 @@ import pytest
 import scipy.optimize as scipy_opt
 import torch
 
+from lensopt.design.tolerance import tolerance_job
 from lensopt.optics.aiming import aim_chief, stop_hit
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.paraxial import field_tangents, first_order
@@ -30,7 +31,6 @@ from lensopt.optics.placement import Placement
 from lensopt.optics.sampling import launch
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
-from lensopt.spec.tolerance_build import make_job
 from lensopt.tolerance.evaluate import evaluate
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -87,16 +87,16 @@ def test_cmount_stop_decenter_closed_form() -> None:
     assert float(gx[0, 0]) == pytest.approx(1 / radius, rel=1e-12) and abs(float(gx[0, 1])) < 1e-12
 
 
-def test_cmount_stop_decenter_in_tolerance_trials() -> None:
+def test_cmount_stop_decenter_in_tolerance_trials(cmount) -> None:
     """With aim = none a stop decenter does nothing (the nominal pupil is traced through a flat air
     surface); with aim = chief the beam follows the stop, and the trial's ESR changes."""
-    model = build(load_spec(ROOT / "lenses" / "cmount_4p.json"))
+    model = cmount
     items = [{"kind": "decenter_x", "limit": 0.05, "surfaces": [0]}, {"kind": "decenter_y", "limit": 0.05,
                                                                        "surfaces": [0]}]
     values = torch.tensor([[0.0, 0.0], [0.03, 0.05]], dtype=torch.float64)
     out = {}
     for aim in ("none", "chief"):
-        job = make_job(model, ToleranceSpec.model_validate({"items": items, "aim": aim, "sampling": "rings:6"}))
+        job = tolerance_job(model, ToleranceSpec.model_validate({"items": items, "aim": aim, "sampling": "rings:6"}))
         out[aim] = evaluate(job.setup, job.params(values))
     none, chief = out["none"]["esr"] * 1e3, out["chief"]["esr"] * 1e3
     assert abs(float(none[1] - none[0])) < 1e-12  # blind to the stop decenter
@@ -104,8 +104,8 @@ def test_cmount_stop_decenter_in_tolerance_trials() -> None:
     assert float(chief[1] - chief[0]) > 0.05  # µm: the decentered beam is worse
 
 
-def test_cooke_tilted_element_aim_matches_brute_force() -> None:
-    model = build(load_spec(ROOT / "specs" / "cooke_triplet.toml"))
+def test_cooke_tilted_element_aim_matches_brute_force(cooke) -> None:
+    model = cooke
     system = model.system
     lens = _placed(model.lens, groups=((0, 1),), group_decenter=torch.tensor([[0.05, 0.0]], dtype=torch.float64),
                    group_tilt=torch.tensor([[20 * ARCMIN, 0.0]], dtype=torch.float64))

@@ -9,22 +9,21 @@ trials); ``make test-slow``. The full study at rings:12 is ``benchmarks/toleranc
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import pytest
 
+from lensopt.design.tolerance import tolerance_job
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
-from lensopt.spec.tolerance_build import make_job
-from lensopt.tolerance.run import HIGHER_IS_BETTER, monte_carlo, yield_table
-
-CMOUNT = Path(__file__).resolve().parents[2] / "lenses" / "cmount_4p.json"
+from lensopt.tolerance.job import HIGHER_IS_BETTER
+from lensopt.tolerance.monte_carlo import monte_carlo, yield_table
+from tests.helpers import CMOUNT
 
 
 @pytest.mark.slow
 def test_cmount_s62_monte_carlo_converges() -> None:
     model = build(load_spec(CMOUNT))
-    job = make_job(model, ToleranceSpec(profile="s6.2", sampling="rings:6", chunk=50))
+    job = tolerance_job(model, ToleranceSpec(profile="s6.2", sampling="rings:6", chunk=50))
     small = monte_carlo(job, 100, seed=1)
     large = monte_carlo(job, 1000, seed=2)  # a different seed: independent draws
     family = yield_table(small.scalar, higher_is_better=HIGHER_IS_BETTER["esr"], confidence=1 - 0.05 / 5)

@@ -19,13 +19,13 @@ import numpy as np
 import pytest
 import torch
 
+from lensopt.design.tolerance import tolerance_job
 from lensopt.errors import LensoptError
 from lensopt.spec import build, load_spec
 from lensopt.spec.models import LensSpec
 from lensopt.spec.tolerance import ToleranceSpec
-from lensopt.spec.tolerance_build import make_job
 from lensopt.tolerance.evaluate import evaluate
-from lensopt.tolerance.run import monte_carlo
+from lensopt.tolerance.monte_carlo import monte_carlo
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -52,8 +52,8 @@ def test_symmetric_lens_same_esr_at_every_azimuth(compensator: str, aim: str) ->
     values = torch.tensor([[0.0]], dtype=torch.float64)
     # A thickness tolerance keeps the lens symmetric (no placement: the +y run uses the half pupil).
     items = [{"kind": "thickness", "limit": 0.05, "surfaces": [0]}]
-    y = make_job(model, _settings("y", items=items, compensator=compensator, mtf_frequency=30.0, aim=aim))
-    xy = make_job(model, _settings("xy", items=items, compensator=compensator, mtf_frequency=30.0, aim=aim))
+    y = tolerance_job(model, _settings("y", items=items, compensator=compensator, mtf_frequency=30.0, aim=aim))
+    xy = tolerance_job(model, _settings("xy", items=items, compensator=compensator, mtf_frequency=30.0, aim=aim))
     assert y.setup.half and not xy.setup.half
     values = torch.tensor([[0.0], [0.04]], dtype=torch.float64)
     a, b = evaluate(y.setup, y.params(values)), evaluate(xy.setup, xy.params(values))
@@ -85,7 +85,7 @@ def test_decentered_lens_fields_match_optiland() -> None:
     model = _model(single_wavelength=True)
     lens, system = model.lens, model.system
     fields = [[0.0, 1.0], [0.0, -1.0], [1.0, 0.0], [-1.0, 0.0], [0.6, 0.8]]
-    job = make_job(model, _settings(fields))
+    job = tolerance_job(model, _settings(fields))
     dy = 0.1
     out = evaluate(job.setup, job.params(torch.tensor([[dy]], dtype=torch.float64)))
     rms, centroid = out["rms"][0].numpy(), out["centroid"][0].numpy()
@@ -132,11 +132,11 @@ def test_fields_setting_is_checked_and_monte_carlo_runs() -> None:
     with pytest.raises(ValueError):
         ToleranceSpec.model_validate({"profile": "s6.2", "fields": "x"})
     model = _model()
-    job = make_job(model, _settings("xy", items=[{"kind": "decenter_y", "limit": 0.05},
+    job = tolerance_job(model, _settings("xy", items=[{"kind": "decenter_y", "limit": 0.05},
                                                  {"kind": "tilt_x", "limit": 2.0}], compensator="focus"))
     mc = monte_carlo(job, 6, 0)
     assert mc.metrics["rms"].shape == (6, 9) and np.isfinite(mc.scalar).all()
-    axis = make_job(model, _settings([[0.0, 0.0]], items=[{"kind": "decenter_y", "limit": 0.05}]))
+    axis = tolerance_job(model, _settings([[0.0, 0.0]], items=[{"kind": "decenter_y", "limit": 0.05}]))
     out = evaluate(axis.setup, axis.params(torch.tensor([[0.0] * len(axis.tols)], dtype=torch.float64)))
     assert float(out["distortion"][0]) == 0.0 and torch.isfinite(out["esr"]).all()
 

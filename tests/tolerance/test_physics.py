@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 import torch
 
+from lensopt.design.tolerance import tolerance_job
 from lensopt.optics.paraxial import first_order
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
-from lensopt.spec.tolerance_build import make_job
 from lensopt.tolerance.evaluate import evaluate
 from lensopt.tolerance.model import params_lens
 
@@ -55,7 +55,7 @@ def test_thickness_moves_paraxial_focus_by_the_formula(gap: int) -> None:
     slopes = _ynu_slopes(lens.curvature.tolist(), lens.thickness.tolist(), n, float(first_order(lens, system).epd))
     u_s, u_img = slopes[gap], slopes[-1]
     per_mm = -n[gap + 1] * u_s**2 / (n[-1] * u_img**2)  # ΔBFL / δ
-    job = make_job(model, _settings(items=[{"kind": "thickness", "limit": 0.05, "surfaces": [gap]}]))
+    job = tolerance_job(model, _settings(items=[{"kind": "thickness", "limit": 0.05, "surfaces": [gap]}]))
     bfl0 = float(first_order(lens, system).bfl)
     # Paraxial: the trial lens's own back focal length, for a small δ (the formula is first order).
     delta = 1e-3
@@ -72,7 +72,7 @@ def test_thickness_moves_paraxial_focus_by_the_formula(gap: int) -> None:
     assert comp[2] == pytest.approx(0.05 * per_mm, rel=0.03)
 
 
-def test_surface_decenter_moves_centroid_as_optiland_says() -> None:
+def test_surface_decenter_moves_centroid_as_optiland_says(cooke) -> None:
     pytest.importorskip("optiland")
     from optiland import optic as ol_optic
     from optiland.materials import IdealMaterial
@@ -80,12 +80,12 @@ def test_surface_decenter_moves_centroid_as_optiland_says() -> None:
 
     from lensopt.optics.bundle import trace_bundle
 
-    model = build(load_spec(ROOT / "specs" / "cooke_triplet.toml"))
+    model = cooke
     lens, system = model.lens, model.system
     settings = _settings(items=[{"kind": "decenter_y", "limit": 0.1, "surfaces": [2]},
                                 {"kind": "decenter_x", "limit": 0.1, "surfaces": [2]}], compensator="none",
                          sampling="rings:8")
-    job = make_job(model, settings)
+    job = tolerance_job(model, settings)
     values = torch.tensor([[0.0, 0.0], [0.1, -0.05]], dtype=torch.float64)  # (dy, dx) of surface 2, mm
     params = job.params(values)
     ours = evaluate(job.setup, params)["centroid"].numpy()  # (K, F, 2)

@@ -9,7 +9,6 @@
 from __future__ import annotations
 
 import json
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -18,13 +17,13 @@ import torch
 from typer.testing import CliRunner
 
 from lensopt.cli.app import app
+from lensopt.design.tolerance import tolerance_job
 from lensopt.errors import LensoptError
-from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
-from lensopt.spec.tolerance_build import make_job
-from lensopt.tolerance.run import monte_carlo, run_trials, yield_table
+from lensopt.tolerance.job import run_trials
+from lensopt.tolerance.monte_carlo import monte_carlo, yield_table
+from tests.helpers import cooke_data
 
-ROOT = Path(__file__).resolve().parents[2]
 runner = CliRunner()
 TINY_RESTORE = {"width": 4, "encoder_blocks": [1, 1], "middle_blocks": 1, "decoder_blocks": [1, 1],
                 "train": {"batch": 2, "patch": 32, "steps": 1, "checkpoint_every": 1, "validate_every": 1,
@@ -35,7 +34,7 @@ IMAGING = {"psnr_count": 2, "psnr_patch": 32, "psnr_sampling": "rings:4", "seed"
 @pytest.fixture
 def tiny_lens(tmp_path: Path) -> Path:
     """The Cooke triplet on a 640 × 480 sensor with a tiny restoration network section."""
-    data = tomllib.loads((ROOT / "specs" / "cooke_triplet.toml").read_text())
+    data = cooke_data()
     data["sensor"]["resolution"] = [640, 480]
     data["restore"] = TINY_RESTORE
     path = tmp_path / "tiny.json"
@@ -79,18 +78,18 @@ def _with(settings: ToleranceSpec, **kw) -> ToleranceSpec:
     return ToleranceSpec.model_validate({**settings.model_dump(), **kw})
 
 
-def test_defocus_lowers_psnr_and_errors() -> None:
-    model = build(load_spec(ROOT / "specs" / "cooke_triplet.toml"))
+def test_defocus_lowers_psnr_and_errors(cooke) -> None:
+    model = cooke
     last = len(model.spec.surfaces) - 1
     settings = ToleranceSpec.model_validate({"items": [{"kind": "thickness", "limit": 0.2, "surfaces": [last]}],
                                              "compensator": "none", "metric": "psnr", **IMAGING})
-    job = make_job(model, settings)
+    job = tolerance_job(model, settings)
     out = run_trials(job, torch.tensor([[0.0], [0.1], [0.3]], dtype=torch.float64))
     pre = out["psnr_pre"]
     assert "psnr_post" not in out
     assert pre[0] > pre[1] > pre[2], pre
     # With the focus compensator the same error is focused away: back to (nearly) the nominal PSNR.
-    job_f = make_job(model, _with(settings, compensator="focus"))
+    job_f = tolerance_job(model, _with(settings, compensator="focus"))
     refocused = run_trials(job_f, torch.tensor([[0.3]], dtype=torch.float64))["psnr_pre"][0]
     assert abs(refocused - pre[0]) < 0.1 * (pre[0] - pre[2])
     # Higher is better: the worst trials are the lowest PSNRs, the yield levels go down.
@@ -99,18 +98,18 @@ def test_defocus_lowers_psnr_and_errors() -> None:
     rows = yield_table(mc.scalar, higher_is_better=True)
     assert rows[0]["value"] >= rows[-1]["value"]
     with pytest.raises(LensoptError, match="tolerance.metric"):
-        make_job(model, _with(settings, items=[{"kind": "decenter_y", "limit": 0.01}]))
+        tolerance_job(model, _with(settings, items=[{"kind": "decenter_y", "limit": 0.01}]))
     with pytest.raises(LensoptError, match="tolerance.psnr_patch"):  # larger than the 4000 × 3000 sensor
-        make_job(model, _with(settings, psnr_patch=4096))
+        tolerance_job(model, _with(settings, psnr_patch=4096))
     with pytest.raises(LensoptError, match="tolerance.psnr_sampling"):
-        make_job(model, _with(settings, psnr_sampling="rings:x"))
+        tolerance_job(model, _with(settings, psnr_sampling="rings:x"))
     with pytest.raises(LensoptError, match="--irm"):
-        make_job(model, _with(settings, metric="esr"), restore=lambda c, i: c)
+        tolerance_job(model, _with(settings, metric="esr"), restore=lambda c, i: c)
 
 
 def test_rss_prediction_turns_around_for_higher_is_better() -> None:
     from lensopt.tolerance.model import Tolerance
-    from lensopt.tolerance.run import SensitivityRow, rss_prediction
+    from lensopt.tolerance.sensitivity import SensitivityRow, rss_prediction
 
     # One uniform tolerance on [−1, 1] with Δ(x) = 0.5 x: σ = 0.5 / √3; worst |Δ| = 0.5.
     row = SensitivityRow("t", "thickness", 1.0, -0.5, 0.5, 0.0, 0.0, 0.5, 0.0, 1.0, 0)

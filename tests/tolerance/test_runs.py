@@ -10,15 +10,15 @@ import numpy as np
 import pytest
 import torch
 
+from lensopt.design.tolerance import tolerance_job, trial_spec
 from lensopt.spec import build, load_spec
 from lensopt.spec.tolerance import ToleranceSpec
-from lensopt.spec.tolerance_build import make_job, trial_spec
 from lensopt.tolerance.evaluate import EvalSetup, evaluate
+from lensopt.tolerance.job import nominal_metrics, run_trials
 from lensopt.tolerance.model import Tolerance, draw, nominal_params
-from lensopt.tolerance.run import moments, monte_carlo, nominal_metrics, run_trials, sensitivity, yield_table
-
-ROOT = Path(__file__).resolve().parents[2]
-CMOUNT = ROOT / "lenses" / "cmount_4p.json"
+from lensopt.tolerance.monte_carlo import monte_carlo, yield_table
+from lensopt.tolerance.sensitivity import moments, sensitivity
+from tests.helpers import CMOUNT
 
 
 def _model(path: Path = CMOUNT):
@@ -28,7 +28,7 @@ def _model(path: Path = CMOUNT):
 def _job(model, **kw):
     data = {"profile": "s6.2", "sampling": "rings:4", "chunk": 4}
     data.update(kw)
-    return make_job(model, ToleranceSpec.model_validate(data))
+    return tolerance_job(model, ToleranceSpec.model_validate(data))
 
 
 def test_s62_profile_on_the_cmount() -> None:
@@ -78,7 +78,7 @@ def test_abbe_and_index_changes_follow_their_definitions() -> None:
 
 def test_huge_tolerances_fail_rays_never_nan() -> None:
     model = _model()
-    job = make_job(model, ToleranceSpec.model_validate({
+    job = tolerance_job(model, ToleranceSpec.model_validate({
         "items": [{"kind": "curvature", "limit": 400.0}, {"kind": "airspace", "limit": 8.0},
                   {"kind": "decenter_y", "limit": 3.0, "surfaces": [3]}],
         "sampling": "rings:4", "chunk": 8}))
@@ -95,7 +95,7 @@ def test_huge_tolerances_fail_rays_never_nan() -> None:
 
 def test_compensator_out_of_range_is_reported() -> None:
     model = _model()
-    job = make_job(model, ToleranceSpec.model_validate({
+    job = tolerance_job(model, ToleranceSpec.model_validate({
         "items": [{"kind": "airspace", "limit": 0.5, "surfaces": [2]}], "sampling": "rings:4",
         "focus_range": 0.01}))
     out = run_trials(job, torch.tensor([[0.0], [0.5]], dtype=torch.float64))
@@ -107,7 +107,7 @@ def test_compensator_out_of_range_is_reported() -> None:
 def test_compensator_without_rays_is_reported() -> None:
     """Every ray lost: no focus can be solved for; reported, metric infinite, nothing NaN."""
     model = _model()
-    job = make_job(model, ToleranceSpec.model_validate({
+    job = tolerance_job(model, ToleranceSpec.model_validate({
         "items": [{"kind": "decenter_y", "limit": 100.0, "surfaces": [1]}], "sampling": "rings:4"}))
     out = run_trials(job, torch.tensor([[100.0]], dtype=torch.float64))
     assert not bool(out["compensator_ok"][0])

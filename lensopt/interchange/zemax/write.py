@@ -74,11 +74,23 @@ def export_zemax(spec: LensSpec) -> str:
         extras["vignetting"] = spec.system.vignetting.model_dump()
     if spec.image.defocus != 0:
         extras["defocus"] = spec.image.defocus
+    glass_lines, gcat = _glasses(spec, model)
     lines = ["VERS 190513 80 123457", "MODE SEQ", f"NAME {_one_line(spec.name)}"]
+    body = _system_lines(spec, gcat, extras)
+    surfaces, surf_extras = _surface_lines(spec, glass_lines)
+    body += surfaces
+    if surf_extras:
+        extras["surfaces"] = surf_extras
+    notes = [f"NOTE 0 {NOTE_PREFIX} " + json.dumps({k: v}, separators=(",", ":")) for k, v in extras.items()]
+    return "\n".join(lines + notes + body) + "\n"
+
+
+def _system_lines(spec: LensSpec, gcat: list[str], extras: dict[str, Any]) -> list[str]:
+    """Units, aperture, glass catalogs, ray aiming, fields (with vignetting factors) and wavelengths; the
+    field data also go into ``extras``."""
     body = ["UNIT MM X W X CM MR CPMM"]
     ap = spec.system.aperture
     body.append(f"ENPD {_num(ap.epd)}" if ap.epd is not None else f"FNUM {_num(ap.fnumber)} 0")
-    glass_lines, gcat = _glasses(spec, model)
     if gcat:
         body.append("GCAT " + " ".join(gcat))
     body.append(f"RAIM 0 {0 if spec.system.aim == 'none' else 2} 1 1 0 0 0 0 0")
@@ -103,6 +115,13 @@ def export_zemax(spec: LensSpec) -> str:
     for k, (w, wt) in enumerate(zip(spec.spectrum.wavelengths_nm, weights, strict=True), start=1):
         body.append(f"WAVM {k} {_num(w * 1e-3)} {_num(wt)}")
     body.append(f"PWAV {spec.spectrum.reference_index + 1}")
+    return body
+
+
+def _surface_lines(spec: LensSpec, glass_lines: list[str]) -> tuple[list[str], dict[str, Any]]:
+    """The object surface, every surface (with the coordinate breaks of moved surfaces and elements) and
+    the image surface; and the per-surface data only lensopt reads back (vary lists, materials, phases)."""
+    body: list[str] = []
     obj = spec.system.object
     body += ["SURF 0", "  TYPE STANDARD", "  CURV 0",
              "  DISZ " + ("INFINITY" if obj == "infinity" else _num(obj.distance))]
@@ -153,10 +172,7 @@ def export_zemax(spec: LensSpec) -> str:
         if extra:
             surf_extras[str(i + 1)] = extra
     body += [f"SURF {number + 1}", "  TYPE STANDARD", "  CURV 0", "  DISZ 0"]
-    if surf_extras:
-        extras["surfaces"] = surf_extras
-    notes = [f"NOTE 0 {NOTE_PREFIX} " + json.dumps({k: v}, separators=(",", ":")) for k, v in extras.items()]
-    return "\n".join(lines + notes + body) + "\n"
+    return body, surf_extras
 
 
 def write_zemax(spec: LensSpec, path: str | Path) -> None:
