@@ -3,7 +3,8 @@ device and backend options, the command's ``Engine`` (``make_engine``), loading 
 contract (``handle_errors``, ``LensoptGroup``) and output paths. Light on purpose: nothing here imports torch,
 so ``lensopt --help`` starts fast. Signals: ``lensopt.cli.signals``.
 
-The contract (README, "Errors and exit codes"): 0 success; 2 a problem the user can fix, printed as one
+The contract (README, "Errors and exit codes"): 0 success; 3 ``optimize`` wrote a lens that violates its
+constraints (``--allow-violations``: 0); 2 a problem the user can fix, printed as one
 line ``error: path.to.field: what is wrong (got X)`` (bad input, usage errors, output paths, memory
 budget); 130 Ctrl-C (SIGINT); 143 SIGTERM; 70 an internal error (a bug: one line, ``--verbose`` shows
 the traceback). Never a traceback without ``--verbose``.
@@ -39,13 +40,13 @@ if TYPE_CHECKING:
     from lensopt.engine import Engine
     from lensopt.spec import Model
 
-__all__ = ["AimOpt", "AimStepsOpt", "BackendOpt", "DeviceOpt", "EX_INTERNAL", "JsonOpt", "LensArg", "LensoptGroup",
-           "check_scheduler",
+__all__ = ["AimOpt", "AimStepsOpt", "BackendOpt", "DeviceOpt", "EX_INTERNAL", "EX_VIOLATED", "JsonOpt", "LensArg",
+           "LensoptGroup", "check_scheduler",
            "LowerLevelFormatter", "SamplingOpt", "SeedOpt", "check_aim", "check_aim_steps", "check_output",
            "check_seed", "console", "err_console", "handle_errors", "load_model", "parse_frequencies",
            "invocation", "make_engine", "parse_sampling", "print_json"]
 
-EX_USAGE, EX_INTERNAL = 2, 70
+EX_USAGE, EX_VIOLATED, EX_INTERNAL = 2, 3, 70
 F = TypeVar("F", bound=Callable[..., Any])
 
 

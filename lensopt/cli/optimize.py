@@ -15,6 +15,7 @@ from rich.table import Table
 from rich.text import Text
 
 from lensopt.cli.common import (
+    EX_VIOLATED,
     JsonOpt,
     SeedOpt,
     check_output,
@@ -193,9 +194,16 @@ def optimize(
                                               "group at the weight its schedule ends on from the first "
                                               "step (to continue a written lens); the written lens keeps "
                                               "the schedules.")] = False,
-    checkpoint: Annotated[Path | None, typer.Option("--checkpoint", help="restored: checkpoint folder.")] = None,
-    resume: Annotated[bool, typer.Option("--resume", help="restored: continue --checkpoint.")] = False,
+    checkpoint: Annotated[Path | None, typer.Option("--checkpoint", help="Checkpoint folder: the run's state "
+                                                    "(θ, damping, schedule position, bound glasses; restored: "
+                                                    "the network too), written every 30 s, at the end and on "
+                                                    "Ctrl-C or SIGTERM.")] = None,
+    resume: Annotated[bool, typer.Option("--resume", help="Continue the run in --checkpoint (the same spec and "
+                                         "options): the lens is the uninterrupted run's, bit for bit.")] = False,
     log_dir: Annotated[Path | None, typer.Option("--log-dir", help="restored: TensorBoard folder.")] = None,
+    allow_violations: Annotated[bool, typer.Option("--allow-violations", help="Exit 0 when the written lens "
+                                                   "violates its constraints (default: exit 3, the lens "
+                                                   "written all the same).")] = False,
 ) -> None:
     """Levenberg–Marquardt (or Adam) for spot size with solves and constraints; Ctrl-C keeps the best lens."""
     from lensopt.design import optimize as run_optimize
@@ -221,12 +229,15 @@ def optimize(
     try:
         with LiveProgress(err_console, enabled=not quiet) as live:
             result = run_optimize(start_spec, optimizer=optimizer, steps=steps, seed=seed, callback=live,
-                                  device=device, jacobian=jacobian, full_weight=full_weight, engine=engine)
+                                  device=device, jacobian=jacobian, full_weight=full_weight, engine=engine,
+                                  checkpoint=checkpoint, resume=resume)
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the first step: the best lens is the start lens
         with signals_deferred():
             save_json(start_spec, output)
         line = f"{signal_word()} before the first step; wrote the start lens to {output}"
         raise typer.Exit(report_signal(line)) from None
+    if checkpoint is not None and not quiet:
+        err_console.print(f"wrote {checkpoint}", highlight=False)
     with signals_deferred():  # a second signal waits until the file is complete
         save_json(result.spec, output)  # atomic
     s = _summary_of(start_spec, result, seed, str(output), engine)
@@ -237,6 +248,11 @@ def optimize(
     if result.interrupted:  # the summary above says so
         state.signal_reported = True
         raise typer.Exit(state.signal_exit)
+    if not s["constraints"]["satisfied"] and not allow_violations:
+        why = ", ".join(s["constraints"]["violated"])
+        err_console.print(f"warning: {output} violates its constraints ({why}); "
+                          f"exit {EX_VIOLATED} (--allow-violations: 0)", highlight=False, markup=False)
+        raise typer.Exit(EX_VIOLATED)
 
 
 def _summary_of(start_spec: Any, result: OptimizeResult, seed: int, output: str, engine: Engine) -> dict[str, Any]:

@@ -9,6 +9,7 @@ where the gradient was taken.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import torch
 from torch import Tensor
@@ -94,6 +95,38 @@ class AdamOptimizer:
         self.accepted += 1
         self.history.append(merit)
         return StepInfo(True, merit, self.damping, "")
+
+    def snapshot(self) -> tuple[dict[str, Tensor], dict[str, Any]]:
+        """The state that decides the next steps, as (tensors, JSON values), for a checkpoint: the point,
+        the last checked point, Adam's moments and step counts, the learning rate (halved by rejections),
+        the merit history and counts."""
+        tensors = {"param": self._param.detach().clone()}
+        if self._previous is not None:
+            tensors["previous"] = self._previous.clone()
+        moments: dict[str, Any] = {}
+        for k, v in self._opt.state_dict()["state"].get(0, {}).items():
+            if isinstance(v, Tensor):
+                tensors[f"adam.{k}"] = v.clone()
+            else:
+                moments[k] = v
+        return tensors, {"lr": [g["lr"] for g in self._opt.param_groups], "scalars": moments,
+                         "history": list(self.history), "accepted": self.accepted, "rejected": self.rejected}
+
+    def restore(self, tensors: dict[str, Tensor], values: dict[str, Any]) -> None:
+        """Continue from ``snapshot``'s state."""
+        like = self._param.detach()
+        with torch.no_grad():
+            self._param.copy_(tensors["param"].to(like))
+        self._previous = tensors["previous"].to(like).clone() if "previous" in tensors else None
+        state = {k[5:]: v.to(like.device) for k, v in tensors.items() if k.startswith("adam.")}
+        state.update(values["scalars"])
+        sd = self._opt.state_dict()
+        sd["state"] = {0: state} if state else {}
+        for group, lr in zip(sd["param_groups"], values["lr"], strict=True):
+            group["lr"] = lr
+        self._opt.load_state_dict(sd)
+        self.history = [float(h) for h in values["history"]]
+        self.accepted, self.rejected = int(values["accepted"]), int(values["rejected"])
 
     def stop_reason(self) -> str | None:
         return None

@@ -21,10 +21,14 @@ from lensopt.optim.adam import AdamOptimizer
 from lensopt.optim.lm import LevenbergMarquardt, Trial
 from lensopt.optim.problem import Problem
 
-__all__ = ["Progress", "OptimizeResult", "OptimizeError", "Rebind", "run_problem", "make_optimizer",
+__all__ = ["Progress", "OptimizeResult", "OptimizeError", "Rebind", "RunState", "run_problem", "make_optimizer",
            "JACOBIANS"]
 
 JACOBIANS = ("eager", "compiled")
+
+MIN_PHASE_STEPS = 10
+"""Fewest steps a phase (glasses free, glasses bound) may get: a run too short for that is refused
+(``run_problem``) instead of binding glasses that have barely moved."""
 
 
 class OptimizeError(LensoptError):
@@ -102,6 +106,41 @@ class OptimizeResult:
     image_history: list[tuple[int, float]] = field(default_factory=list)
 
 
+@dataclass
+class RunState:
+    """Where a run stands after a completed step: what ``run_problem(resume=...)`` needs to continue it
+    so that the rest is bit for bit the uninterrupted run's. Nothing random is left to restore: ray
+    samplings are drawn from the spec's seed when the problem is built, image batches and their noise
+    from (seed, step).
+
+    Attributes:
+        step, total: completed steps and the planned total.
+        method: ``lm`` or ``adam``.
+        bind_step: the step at which the glasses are (or were) bound; None: never.
+        theta_at_bind: θ of the glasses-free problem when they were bound (binding again from it gives the
+            same catalog glasses and the same bound problem); None while they are free.
+        optimizer: the optimizer's ``snapshot()`` (tensors, JSON values).
+        phase: the phase's name; history, image_history, start_*: the result's so far.
+        elapsed_s: wall time of the run so far (earlier sessions included).
+        final: the run has ended (finished, stopped or interrupted).
+    """
+
+    step: int
+    total: int
+    method: str
+    bind_step: int | None
+    theta_at_bind: torch.Tensor | None
+    optimizer: tuple[dict[str, torch.Tensor], dict[str, Any]]
+    phase: str
+    history: list[tuple[int, float, float, float]]
+    image_history: list[tuple[int, float]]
+    start_esr_um: float
+    start_merit: float
+    start_psnr_db: float
+    elapsed_s: float
+    final: bool = False
+
+
 def make_optimizer(problem: Problem, theta: torch.Tensor, method: str,
                    jacobian: str = "eager") -> LevenbergMarquardt | AdamOptimizer:
     """An LM or Adam state machine on ``problem``'s residual function; ``jacobian``: ``eager``
@@ -127,13 +166,16 @@ was bound."""
 
 def run_problem(problem: Problem, *, optimizer: str | None = None, steps: int | None = None,
                 callback: Callable[[Progress], None] | None = None, jacobian: str = "eager",
-                bind: Rebind | None = None) -> OptimizeResult:
+                bind: Rebind | None = None, resume: RunState | None = None,
+                on_state: Callable[[RunState], None] | None = None) -> OptimizeResult:
     """Optimize ``problem`` from its start θ0.
 
     Ctrl-C (KeyboardInterrupt) ends the run early; the result then holds the best lens so far.
     ``optimizer``: ``lm`` or ``adam`` (default: the settings'); ``steps``: default the settings';
     ``jacobian``: ``eager`` or ``compiled`` (see ``make_optimizer``); ``bind``: how the glasses are bound
-    at ``bind_at`` of the run (None: they are not).
+    at ``bind_at`` of the run (None: they are not). ``on_state`` sees the ``RunState`` after every
+    completed step and once more at the end (``final``: after an interrupt it is the last completed
+    step's); ``resume`` continues from such a state (same problem, optimizer and steps).
 
     Raises:
         OptimizeError: nothing varies, or the start lens is not usable (the message says why).
@@ -148,15 +190,40 @@ def run_problem(problem: Problem, *, optimizer: str | None = None, steps: int | 
     total = steps if steps is not None else opt.steps
     result, start = _start(problem)
     bind_step = round(opt.bind_at * total) if bind is not None and problem.num_glasses and opt.bind_at < 1 else None
+    if bind_step is not None:
+        _check_phases(total, bind_step, opt.bind_at, "--steps" if steps is not None else "optimize.steps")
     state = make_optimizer(problem, problem.theta0, method, jacobian)
     phase = "glasses free" if problem.num_glasses else "fixed glasses"
     failing = 1.0 - start.valid_fraction
     event = f"{100 * failing:.1f} % of the rays fail at the start" if failing > 0 else ""
     k = 0
+    theta_at_bind: torch.Tensor | None = None
+    before = 0.0  # wall time of the earlier sessions of a resumed run
+    if resume is not None:
+        if (resume.method, resume.total) != (method, total):
+            raise OptimizeError(f"the run to resume used {resume.method} for {resume.total} steps, this one "
+                                f"{method} for {total}: resume with the same settings")
+        k, bind_step, before = resume.step, resume.bind_step, resume.elapsed_s
+        result.history, result.image_history = list(resume.history), list(resume.image_history)
+        result.start_esr_um, result.start_merit = resume.start_esr_um, resume.start_merit
+        result.start_psnr_db = resume.start_psnr_db
+        if resume.theta_at_bind is not None and bind is not None:
+            theta_at_bind = resume.theta_at_bind.to(problem.theta0)
+            problem, state, _ = _bind(problem, theta_at_bind, result, method, bind, jacobian)
+        state.restore(*resume.optimizer)
+        phase, event = resume.phase, ""
+
+    def run_state(final: bool = False) -> RunState:
+        return RunState(k, total, method, bind_step, theta_at_bind, state.snapshot(), phase,
+                        list(result.history), list(result.image_history), result.start_esr_um,
+                        result.start_merit, result.start_psnr_db, before + time.perf_counter() - t0, final)
+
+    last = run_state() if on_state is not None else None
     try:
         while k < total:
             if bind_step is not None and k >= bind_step and not result.bound:
-                problem, state, event = _bind(problem, state, result, method, bind, jacobian)
+                theta_at_bind = state.theta.clone()
+                problem, state, event = _bind(problem, theta_at_bind, result, method, bind, jacobian)
                 phase = "glasses bound"
             frac = k / total
             scale = problem.row_scale(frac)
@@ -171,8 +238,11 @@ def run_problem(problem: Problem, *, optimizer: str | None = None, steps: int | 
             else:
                 esr = float("nan") if r is None else 1e3 * (problem.esr_mm(r) if "tra" in problem.slices
                                                               else problem.spot_esr_mm(state.theta))
-            elapsed = time.perf_counter() - t0
+            elapsed = before + time.perf_counter() - t0
             result.history.append((k, elapsed, info.merit, esr))
+            if on_state is not None:
+                last = run_state()
+                on_state(last)
             if callback is not None:
                 callback(_progress(problem, state, info, scale, k, total, phase, esr, event, elapsed, image_loss))
             event = ""
@@ -189,13 +259,39 @@ def run_problem(problem: Problem, *, optimizer: str | None = None, steps: int | 
         else:
             result.stop_reason = f"{total} steps"
         if bind_step is not None and not result.bound and bind_step <= k and not result.interrupted:
-            problem, state, _ = _bind(problem, state, result, method, bind, jacobian)
+            theta_at_bind = state.theta.clone()
+            problem, state, _ = _bind(problem, theta_at_bind, result, method, bind, jacobian)
+            phase = "glasses bound"
     except KeyboardInterrupt:
         result.interrupted = True
         result.stop_reason = "interrupted"
+    result.steps = k
     _finish(result, problem, state.theta)
-    result.elapsed_s = time.perf_counter() - t0
+    result.elapsed_s = before + time.perf_counter() - t0
+    if on_state is not None:
+        if result.interrupted:  # the last completed step's state (an interrupt may land inside a step)
+            last.final = True
+            on_state(last)
+        else:
+            on_state(run_state(final=True))
     return result
+
+
+def _check_phases(total: int, bind_step: int, bind_at: float, path: str) -> None:
+    """Refuse a run whose glasses-free or glasses-bound phase would get fewer than ``MIN_PHASE_STEPS``."""
+
+    def phases(n: int) -> dict[str, int]:
+        b = round(bind_at * n)
+        return {"glasses-free": b, "glasses-bound": n - b} if bind_at > 0 else {"glasses-bound": n}
+
+    short = {name: n for name, n in phases(total).items() if n < MIN_PHASE_STEPS}
+    if short:
+        need = MIN_PHASE_STEPS
+        while min(phases(need).values()) < MIN_PHASE_STEPS:
+            need += 1
+        what = " and ".join(f"{n} to the {name} phase" for name, n in short.items())
+        raise OptimizeError(f"{total} steps leave {what} (glasses bound at {bind_at:g} of the run); each phase "
+                            f"needs at least {MIN_PHASE_STEPS}: use {need} steps or more", path=path, got=total)
 
 
 def _start(problem: Problem) -> tuple[OptimizeResult, Any]:
@@ -270,11 +366,11 @@ def _valid_fraction(problem: Problem, r: torch.Tensor | None) -> float:
     return float((rows == 0).to(r.dtype).mean())
 
 
-def _bind(problem: Problem, state, result: OptimizeResult, method: str, bind: Rebind,  # noqa: ANN001, ANN202
+def _bind(problem: Problem, theta: torch.Tensor, result: OptimizeResult, method: str, bind: Rebind,  # noqa: ANN202
           jacobian: str = "eager"):
-    """Bind glasses to the catalog (``bind`` rebuilds the problem without glass variables), reset the
-    optimizer."""
-    new, bound = bind(problem, state.theta)
+    """Bind glasses to the catalog at ``theta`` (``bind`` rebuilds the problem without glass variables),
+    with a fresh optimizer."""
+    new, bound = bind(problem, theta)
     ev = new.evaluate(new.theta0)
     if not ev.physical:
         raise OptimizeError(f"binding the glasses to the catalog made the lens unusable: {ev.reason}")

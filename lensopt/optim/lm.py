@@ -24,6 +24,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 from torch import Tensor
@@ -131,11 +132,33 @@ class LevenbergMarquardt:
         self.history: list[float] = []
         self.accepted = 0
         self.rejected = 0
+        self._keep_D = False  # restored with J held: the next J is the one D already saw (``restore``)
 
     @property
     def residuals(self) -> Tensor | None:
         """ℓ at the current θ (without row multipliers), once computed."""
         return self._r
+
+    def snapshot(self) -> tuple[dict[str, Tensor], dict[str, Any]]:
+        """The state that decides the next steps, as (tensors, JSON values), for a checkpoint: θ, λ, D, the
+        merit history of the stopping rules, the counts, and whether J at θ is held (after a rejected
+        step the next try reuses it, and D has already seen it). ℓ and J are not stored: they are
+        functions of θ, evaluated again on ``restore`` to the same bits."""
+        tensors = {"theta": self.theta.clone()}
+        if self.D is not None:
+            tensors["D"] = self.D.clone()
+        return tensors, {"damping": self.damping, "history": list(self.history), "accepted": self.accepted,
+                         "rejected": self.rejected, "jacobian_held": self._J is not None}
+
+    def restore(self, tensors: dict[str, Tensor], values: dict[str, Any]) -> None:
+        """Continue from ``snapshot``'s state: the next step is the one the snapshotted run took next."""
+        self.theta = tensors["theta"].to(self.theta).clone()
+        self.D = tensors["D"].to(self.theta).clone() if "D" in tensors else None
+        self.damping = float(values["damping"])
+        self.history = [float(h) for h in values["history"]]
+        self.accepted, self.rejected = int(values["accepted"]), int(values["rejected"])
+        self._J = self._r = None
+        self._keep_D = bool(values["jacobian_held"]) and self.D is not None
 
     def merit(self, scale: Tensor) -> float:
         """½‖s ⊙ ℓ(θ)‖² at the current θ."""
@@ -151,7 +174,9 @@ class LevenbergMarquardt:
                 col = torch.linalg.vector_norm(scale[:, None] * self._J, dim=0)
             col = torch.where(torch.isfinite(col), col, torch.zeros_like(col))
             s = self.settings
-            if self.D is None:
+            if self._keep_D:  # this J was held when the run was snapshotted: D has seen it
+                self._keep_D = False
+            elif self.D is None:
                 self.D = col.clamp_min(s.epsilon)
             else:
                 self.D = s.beta * torch.maximum(self.D, col) + (1 - s.beta) * col
@@ -218,6 +243,7 @@ class LevenbergMarquardt:
         GTRA target): the next step evaluates them again. λ and D are kept."""
         self._J = None
         self._r = None
+        self._keep_D = False  # a new J: D sees it
 
     def reset(self) -> None:
         """Back to the initial damping and damping matrix (after binding glasses, S4.1.3)."""

@@ -39,7 +39,8 @@ def constraint_report(problem: Problem, theta: torch.Tensor, sampling: PupilSamp
     Returns a dict with ``gaps`` (per gap: kind, centre thickness, min/max axial ray path t_z, bounds,
     satisfied), ``max_angle_deg`` (incidence/refraction over all interfaces), ``max_normal_deg``,
     ``distortion_percent`` and ``relative_illumination`` per field, ``materials`` per element,
-    ``failed_rays``, and ``satisfied``: no failed ray and every enabled constraint met within
+    ``failed_rays``, ``violated`` (the requirements not met, in words), and ``satisfied``: no failed ray
+    and every enabled constraint met within
     ``TOLERANCE`` (soft constraints settle a hair past their thresholds; specs that must meet a
     requirement strictly ask for a small margin).
     """
@@ -63,6 +64,7 @@ def constraint_report(problem: Problem, theta: torch.Tensor, sampling: PupilSamp
         out: dict[str, Any] = {"failed_rays": int((~valid).sum()), "rays": int(valid.numel()),
                                "sampling": f"{sampling or problem.sampling} + {problem.opt.rim_rays} rim rays + centre"}
         ok = out["failed_rays"] == 0
+        violated = [] if ok else [f"{out['failed_rays']} rays fail"]
         if cons.ray_path is not None:
             lo, hi = problem.gap_bounds(lens)
             gaps = []
@@ -72,6 +74,8 @@ def constraint_report(problem: Problem, theta: torch.Tensor, sampling: PupilSamp
                 tmax = float(torch.where(valid, tz[s], -big).max())
                 good = tmin >= float(lo[s]) - TOLERANCE["mm"] and tmax <= float(hi[s]) + TOLERANCE["mm"]
                 ok &= good
+                if not good:
+                    violated.append(f"{kind} gap {s} ray path")
                 gaps.append({"gap": s, "kind": kind, "centre": float(lens.thickness[s]), "min": tmin, "max": tmax,
                              "lower": float(lo[s]), "upper": None if float(hi[s]) >= BIG else float(hi[s]),
                              "satisfied": good})
@@ -83,22 +87,33 @@ def constraint_report(problem: Problem, theta: torch.Tensor, sampling: PupilSamp
             worst = torch.minimum(worst, torch.where(valid, torch.minimum(h.cos2_in, h.cos2_out), worst).min())
         out["max_angle_deg"] = _deg(torch.maximum(worst, zero))
         if cons.ray_angle is not None:
-            ok &= out["max_angle_deg"] <= cons.ray_angle.max_deg + TOLERANCE["deg"]
+            good = out["max_angle_deg"] <= cons.ray_angle.max_deg + TOLERANCE["deg"]
+            ok &= good
+            violated += [] if good else [f"ray angle {out['max_angle_deg']:.2f}° > {cons.ray_angle.max_deg:g}°"]
         normals = [s for s in problem.interfaces if not problem.surfaces[s].plane]
         nz2 = torch.ones((), dtype=tz.dtype)
         for s in normals:
             nz2 = torch.minimum(nz2, torch.where(valid, bundle.result.hits[s].normal[..., 2] ** 2, 1.0).min())
         out["max_normal_deg"] = _deg(nz2)
         if cons.surface_normal is not None:
-            ok &= out["max_normal_deg"] <= cons.surface_normal.max_deg + TOLERANCE["deg"]
+            good = out["max_normal_deg"] <= cons.surface_normal.max_deg + TOLERANCE["deg"]
+            ok &= good
+            violated += [] if good else [f"surface normal {out['max_normal_deg']:.2f}° > "
+                                         f"{cons.surface_normal.max_deg:g}°"]
         d = distortion(lens, problem.system, spot, stats)
         out["distortion_percent"] = [100 * float(v) for v in d]
         if cons.distortion is not None:
-            ok &= max(abs(v) for v in out["distortion_percent"]) <= cons.distortion.max_percent + TOLERANCE["percent"]
+            worst_d = max(abs(v) for v in out["distortion_percent"])
+            good = worst_d <= cons.distortion.max_percent + TOLERANCE["percent"]
+            ok &= good
+            violated += [] if good else [f"distortion {worst_d:.3f} % > {cons.distortion.max_percent:g} %"]
         ri = relative_illumination_std(spot, problem.system.wavelength_weights)
         out["relative_illumination"] = [float(v) for v in ri]
         if cons.relative_illumination is not None:
-            ok &= min(out["relative_illumination"]) >= cons.relative_illumination.min - TOLERANCE["fraction"]
+            good = min(out["relative_illumination"]) >= cons.relative_illumination.min - TOLERANCE["fraction"]
+            ok &= good
+            violated += [] if good else [f"relative illumination {min(out['relative_illumination']):.3f} < "
+                                         f"{cons.relative_illumination.min:g}"]
         glass = problem.param.glass_physical(theta).tolist()
         gvars = [v.surface for v in problem.param.of_kind("glass")]
         mats = []
@@ -112,5 +127,6 @@ def constraint_report(problem: Problem, theta: torch.Tensor, sampling: PupilSamp
                 m = problem.media[s + 1]
                 mats.append({"surface": s, "material": m.label, "nd": m.nd, "vd": m.vd})
         out["materials"] = mats
+        out["violated"] = violated
         out["satisfied"] = bool(ok)
     return out

@@ -65,7 +65,7 @@ def test_written_values_reproduce_the_final_residuals(make_cooke) -> None:  # no
 def test_glasses_are_bound_to_catalog_glasses_by_name(make_cooke) -> None:  # noqa: ANN001
     # The flint varies freely for half the run, is then bound to the nearest Schott preferred glass,
     # frozen, and the rest of the run (and the written lens) uses that glass's catalog formula.
-    data = make_cooke(catalog="schott-preferred", bind_at=0.5, steps=6)
+    data = make_cooke(catalog="schott-preferred", bind_at=0.5, steps=20)
     data["surfaces"][2]["vary"] = ["material", "radius"]
     data["surfaces"][0]["vary"] = ["radius"]
     result = optimize(parse_spec(data))
