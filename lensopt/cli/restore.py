@@ -48,7 +48,11 @@ def train_irm_cmd(
     seed: Annotated[int, typer.Option("--seed", help="Seed of every random draw.")] = 0,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON summary.")] = False,
 ) -> None:
-    """Train the restoration network for a fixed lens (S4.3.2): Adam on MAE, cosine schedule."""
+    """Train the restoration network for a fixed lens (S4.3.2): Adam on MAE, cosine schedule.
+
+    The network restores the lens's colour channels, the ones simulate and evaluate render: R, G, B from
+    spectrum.rgb_weights, else the seed's split of the spectrum (S4.1.2). The checkpoint records them and
+    the lens structure; restore, evaluate --irm and tolerance --irm refuse a network that differs."""
     from lensopt.devices import resolve_device
 
     engine = make_engine()
@@ -136,26 +140,29 @@ def restore_cmd(
     region: Annotated[str | None, typer.Option("--region", help="Where the capture lies on the sensor.")] = None,
     device: Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N | auto")] = "cpu",
 ) -> None:
-    """Restore a capture of LENS with the network of CHECKPOINT."""
+    """Restore a capture of LENS with the network of CHECKPOINT.
+
+    A gray capture through a colour network is restored as R = G = B and written back gray (with a note);
+    a network trained for another lens structure or other channels is refused."""
     import numpy as np
     import torch
 
     from lensopt.devices import resolve_device
     from lensopt.imaging.io import read_image, write_image
     from lensopt.imaging.scene import parse_region
-    from lensopt.restore.apply import load_restorer, restore_image
+    from lensopt.restore.apply import load_restorer, match_channels, restore_image
 
     engine = make_engine()
     dev = resolve_device(device)
     model = load_model(lens)
     net, setup, tile = load_restorer(checkpoint, model, device=dev, option="CHECKPOINT", engine=engine)
     arr, info = read_image(image, engine=engine)
-    if arr.shape[-1] != net.config.channels:
-        raise LensoptError(f"the network restores {net.config.channels}-channel images", path="IMAGE",
-                           got=f"{arr.shape[-1]} channels")
     reg = parse_region(region, setup.sensor, info.width, info.height)
-    x = torch.from_numpy(arr).permute(2, 0, 1).to(dev)
+    x, notice = match_channels(torch.from_numpy(arr).permute(2, 0, 1).to(dev), net.config.channels)
+    if notice:
+        err_console.print(f"note: IMAGE is {notice}, written back in {arr.shape[-1]} channel(s)", highlight=False)
     y = restore_image(net, model.lens, model.system, setup, x, reg, tile=tile)
+    y, _ = match_channels(y, arr.shape[-1])
     desc = write_image(output, np.ascontiguousarray(y.clamp(0, 1).permute(1, 2, 0).cpu().numpy()), info)
     console.print(f"wrote {output} ({desc})", highlight=False)
 
