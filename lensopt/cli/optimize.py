@@ -193,7 +193,9 @@ def optimize(
                                               "group at the weight its schedule ends on from the first "
                                               "step (to continue a written lens); the written lens keeps "
                                               "the schedules.")] = False,
-    checkpoint: Annotated[Path | None, typer.Option("--checkpoint", help="restored: checkpoint folder.")] = None,
+    checkpoint: Annotated[Path | None, typer.Option("--checkpoint", help="restored: checkpoint folder of the lens "
+                                                    "and its network (default: OUTPUT with the suffix .irm, e.g. "
+                                                    "out.irm/ beside out.json).")] = None,
     resume: Annotated[bool, typer.Option("--resume", help="restored: continue --checkpoint.")] = False,
     log_dir: Annotated[Path | None, typer.Option("--log-dir", help="restored: TensorBoard folder.")] = None,
 ) -> None:

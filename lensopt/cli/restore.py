@@ -19,7 +19,7 @@ from lensopt.cli.common import LensArg, console, err_console, handle_errors, loa
 from lensopt.cli.signals import stop_on_signals, stopped_at_step_boundary
 from lensopt.errors import LensoptError
 
-__all__ = ["commands", "optimize_restored", "parse_grid_text", "data_sources"]
+__all__ = ["commands", "optimize_restored", "network_beside", "parse_grid_text", "data_sources"]
 
 commands = typer.Typer()  # its commands, put in order by lensopt.cli.app
 
@@ -192,8 +192,9 @@ def data_sources(images: str, patch: int, seed: int, *, engine: Any = None) -> t
 def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed: int, checkpoint: Path | None,
                       resume: bool, device: str, log_dir: Path | None, quiet: bool, as_json: bool,
                       engine: Any = None) -> None:
-    """``lensopt optimize`` with ``objective = "restored"``: the joint run, then the lens (and, with
-    --checkpoint, the network) written; rank 0 only writes and prints under torchrun."""
+    """``lensopt optimize`` with ``objective = "restored"``: the joint run, then the lens and its network
+    written (the network in the checkpoint folder ``checkpoint``, default ``network_beside(output)``); rank 0
+    only writes and prints under torchrun."""
     from lensopt.design.joint_run import run_joint
     from lensopt.devices import resolve_device
     from lensopt.parallel import check_same_settings, distributed
@@ -201,6 +202,7 @@ def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed:
 
     if output.suffix.lower() != ".json":
         raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
+    checkpoint = checkpoint or network_beside(output)
     with distributed(resolve_device(device)) as (dist, dev):
         check_same_settings(dist.world, {"spec": start_spec.model_dump(mode="json"), "steps": steps, "seed": seed,
                                          "checkpoint": str(checkpoint), "resume": resume})
@@ -221,6 +223,12 @@ def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed:
                 _joint_summary(res, output, checkpoint)
     if res.interrupted:
         raise typer.Exit(stopped_at_step_boundary())
+
+
+def network_beside(output: Path) -> Path:
+    """Where a joint run writes its network when no --checkpoint is given: ``OUT.irm/`` beside ``OUT.json``
+    (a checkpoint folder that ``restore``, ``evaluate --irm`` and ``tolerance --irm`` read)."""
+    return output.with_suffix(".irm")
 
 
 def _joint_line(rec: dict[str, Any]) -> None:
