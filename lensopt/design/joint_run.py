@@ -173,7 +173,8 @@ def save_joint(parts: JointParts, checkpoint: Path, start_spec: Any, step: int,
     meta = {"adam": opt_info, "settings": parts.settings, "history": history,
             "network_config": parts.net_cfg.to_dict(), "lens_structure": lens_structure(parts.spec),
             "colour": {"channels": parts.net_cfg.channels,
-                       "weights": lens_colour(parts.problem.setup.camera.spectrum)[2]}, "start_spec": json.loads(start_spec.model_dump_json()),
+                       "weights": lens_colour(parts.problem.setup.camera.spectrum)[2]},
+            "start_spec": json.loads(start_spec.model_dump_json()),
             "lm": {"damping": lm.damping, "accepted": lm.accepted, "rejected": lm.rejected,
                    "history": list(lm.history)}}
     cur = to_spec(parts.problem, lm.theta)

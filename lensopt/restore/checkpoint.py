@@ -15,11 +15,11 @@ from torch import Tensor
 from lensopt.checkpoint import (
     Checkpoint,
     CheckpointError,
+    describe_structure,
     fingerprint,
     flatten_optimizer,
     lens_structure,
     load_checkpoint,
-    describe_structure,
     unflatten_optimizer,
 )
 from lensopt.restore.config import RestoreConfig
