@@ -28,7 +28,7 @@ from lensopt.errors import LensoptError
 from lensopt.files import atomic_folder
 
 __all__ = ["Checkpoint", "CheckpointError", "save_checkpoint", "load_checkpoint", "fingerprint",
-           "flatten_optimizer", "unflatten_optimizer", "lens_structure", "FORMAT"]
+           "flatten_optimizer", "unflatten_optimizer", "lens_structure", "describe_structure", "FORMAT"]
 
 FORMAT = "lensopt-checkpoint-1"
 _FILES = ("lens.json", "network.safetensors", "state.safetensors")
@@ -171,3 +171,20 @@ def lens_structure(spec: Any) -> dict[str, Any]:
         "surfaces": [[s.type, bool(s.stop)] for s in spec.surfaces],
         "wavelengths": len(spec.spectrum.wavelengths_nm),
     }
+
+
+def describe_structure(structure: dict[str, Any] | None) -> str:
+    """``lens_structure``'s dict in a few words: ``5 surfaces (standard×4, image), stop at 2, 12 wavelengths``."""
+    if not structure:
+        return "an unrecorded lens structure"
+    surfaces = structure.get("surfaces", [])
+    kinds: list[str] = []
+    for kind, _ in surfaces:
+        if kinds and kinds[-1].split("×")[0] == kind:
+            head, _, n = kinds[-1].partition("×")
+            kinds[-1] = f"{head}×{int(n or 1) + 1}"
+        else:
+            kinds.append(kind)
+    stops = [i for i, (_, stop) in enumerate(surfaces) if stop]
+    stop = f", stop at {stops[0]}" if stops else ""
+    return f"{len(surfaces)} surfaces ({', '.join(kinds)}){stop}, {structure.get('wavelengths')} wavelengths"

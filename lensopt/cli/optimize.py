@@ -197,7 +197,8 @@ def optimize(
     checkpoint: Annotated[Path | None, typer.Option("--checkpoint", help="Checkpoint folder: the run's state "
                                                     "(θ, damping, schedule position, bound glasses; restored: "
                                                     "the network too), written every 30 s, at the end and on "
-                                                    "Ctrl-C or SIGTERM.")] = None,
+                                                    "Ctrl-C or SIGTERM (restored, by default: OUTPUT with the "
+                                                    "suffix .irm, e.g. out.irm/ beside out.json).")] = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the run in --checkpoint (the same spec and "
                                          "options): the lens is the uninterrupted run's, bit for bit.")] = False,
     log_dir: Annotated[Path | None, typer.Option("--log-dir", help="restored: TensorBoard folder.")] = None,

@@ -19,7 +19,7 @@ from lensopt.cli.common import LensArg, console, err_console, handle_errors, loa
 from lensopt.cli.signals import stop_on_signals, stopped_at_step_boundary
 from lensopt.errors import LensoptError
 
-__all__ = ["commands", "optimize_restored", "parse_grid_text", "data_sources"]
+__all__ = ["commands", "optimize_restored", "network_beside", "parse_grid_text", "data_sources"]
 
 commands = typer.Typer()  # its commands, put in order by lensopt.cli.app
 
@@ -48,7 +48,11 @@ def train_irm_cmd(
     seed: Annotated[int, typer.Option("--seed", help="Seed of every random draw.")] = 0,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON summary.")] = False,
 ) -> None:
-    """Train the restoration network for a fixed lens (S4.3.2): Adam on MAE, cosine schedule."""
+    """Train the restoration network for a fixed lens (S4.3.2): Adam on MAE, cosine schedule.
+
+    The network restores the lens's colour channels, the ones simulate and evaluate render: R, G, B from
+    spectrum.rgb_weights, else the seed's split of the spectrum (S4.1.2). The checkpoint records them and
+    the lens structure; restore, evaluate --irm and tolerance --irm refuse a network that differs."""
     from lensopt.devices import resolve_device
 
     engine = make_engine()
@@ -136,26 +140,29 @@ def restore_cmd(
     region: Annotated[str | None, typer.Option("--region", help="Where the capture lies on the sensor.")] = None,
     device: Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N | auto")] = "cpu",
 ) -> None:
-    """Restore a capture of LENS with the network of CHECKPOINT."""
+    """Restore a capture of LENS with the network of CHECKPOINT.
+
+    A gray capture through a colour network is restored as R = G = B and written back gray (with a note);
+    a network trained for another lens structure or other channels is refused."""
     import numpy as np
     import torch
 
     from lensopt.devices import resolve_device
     from lensopt.imaging.io import read_image, write_image
     from lensopt.imaging.scene import parse_region
-    from lensopt.restore.apply import load_restorer, restore_image
+    from lensopt.restore.apply import load_restorer, match_channels, restore_image
 
     engine = make_engine()
     dev = resolve_device(device)
     model = load_model(lens)
     net, setup, tile = load_restorer(checkpoint, model, device=dev, option="CHECKPOINT", engine=engine)
     arr, info = read_image(image, engine=engine)
-    if arr.shape[-1] != net.config.channels:
-        raise LensoptError(f"the network restores {net.config.channels}-channel images", path="IMAGE",
-                           got=f"{arr.shape[-1]} channels")
     reg = parse_region(region, setup.sensor, info.width, info.height)
-    x = torch.from_numpy(arr).permute(2, 0, 1).to(dev)
+    x, notice = match_channels(torch.from_numpy(arr).permute(2, 0, 1).to(dev), net.config.channels)
+    if notice:
+        err_console.print(f"note: IMAGE is {notice}, written back in {arr.shape[-1]} channel(s)", highlight=False)
     y = restore_image(net, model.lens, model.system, setup, x, reg, tile=tile)
+    y, _ = match_channels(y, arr.shape[-1])
     desc = write_image(output, np.ascontiguousarray(y.clamp(0, 1).permute(1, 2, 0).cpu().numpy()), info)
     console.print(f"wrote {output} ({desc})", highlight=False)
 
@@ -185,8 +192,9 @@ def data_sources(images: str, patch: int, seed: int, *, engine: Any = None) -> t
 def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed: int, checkpoint: Path | None,
                       resume: bool, device: str, log_dir: Path | None, quiet: bool, as_json: bool,
                       engine: Any = None) -> None:
-    """``lensopt optimize`` with ``objective = "restored"``: the joint run, then the lens (and, with
-    --checkpoint, the network) written; rank 0 only writes and prints under torchrun."""
+    """``lensopt optimize`` with ``objective = "restored"``: the joint run, then the lens and its network
+    written (the network in the checkpoint folder ``checkpoint``, default ``network_beside(output)``); rank 0
+    only writes and prints under torchrun."""
     from lensopt.design.joint_run import run_joint
     from lensopt.devices import resolve_device
     from lensopt.parallel import check_same_settings, distributed
@@ -194,6 +202,7 @@ def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed:
 
     if output.suffix.lower() != ".json":
         raise LensoptError("the optimized lens is written as .json", path="--output", got=str(output))
+    checkpoint = checkpoint or network_beside(output)
     with distributed(resolve_device(device)) as (dist, dev):
         check_same_settings(dist.world, {"spec": start_spec.model_dump(mode="json"), "steps": steps, "seed": seed,
                                          "checkpoint": str(checkpoint), "resume": resume})
@@ -214,6 +223,12 @@ def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed:
                 _joint_summary(res, output, checkpoint)
     if res.interrupted:
         raise typer.Exit(stopped_at_step_boundary())
+
+
+def network_beside(output: Path) -> Path:
+    """Where a joint run writes its network when no --checkpoint is given: ``OUT.irm/`` beside ``OUT.json``
+    (a checkpoint folder that ``restore``, ``evaluate --irm`` and ``tolerance --irm`` read)."""
+    return output.with_suffix(".irm")
 
 
 def _joint_line(rec: dict[str, Any]) -> None:

@@ -31,6 +31,7 @@ from lensopt.design.setup import SpecProblem, build_problem
 from lensopt.design.writeback import to_spec
 from lensopt.engine import Engine
 from lensopt.errors import LensoptError
+from lensopt.imaging.plan import lens_colour
 from lensopt.optim.lm import LevenbergMarquardt, Trial
 from lensopt.optim.settings import ImageSettings
 from lensopt.parallel import Dist
@@ -108,7 +109,7 @@ def joint_parts(start_spec: Any, *, seed: int = 0, device: torch.device | str = 
     dist = dist or Dist()
     spec, notes = joint_spec(start_spec)
     net_cfg, cfg = configs_from_spec(spec.restore)
-    net_cfg = RestoreConfig(**{**net_cfg.to_dict(), "channels": 3})
+    net_cfg = RestoreConfig(**{**net_cfg.to_dict(), "channels": len(lens_colour(start_spec.spectrum)[1])})
     problem = build_problem(spec, seed=seed, method="lm", engine=engine)
     if problem.num_variables == 0:
         raise LensoptError("nothing to optimize: no surface has a vary list", path="surfaces")
@@ -170,7 +171,10 @@ def save_joint(parts: JointParts, checkpoint: Path, start_spec: Any, step: int,
     if lm.D is not None:
         state["lm.D"] = lm.D
     meta = {"adam": opt_info, "settings": parts.settings, "history": history,
-            "network_config": parts.net_cfg.to_dict(), "start_spec": json.loads(start_spec.model_dump_json()),
+            "network_config": parts.net_cfg.to_dict(), "lens_structure": lens_structure(parts.spec),
+            "colour": {"channels": parts.net_cfg.channels,
+                       "weights": lens_colour(parts.problem.setup.camera.spectrum)[2]},
+            "start_spec": json.loads(start_spec.model_dump_json()),
             "lm": {"damping": lm.damping, "accepted": lm.accepted, "rejected": lm.rejected,
                    "history": list(lm.history)}}
     cur = to_spec(parts.problem, lm.theta)

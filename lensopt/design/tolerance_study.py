@@ -14,6 +14,7 @@ import torch
 
 from lensopt.design.tolerance import tolerance_job, trial_spec
 from lensopt.engine import Engine
+from lensopt.errors import LensoptError
 from lensopt.spec.build import Model
 from lensopt.spec.io import save_json
 from lensopt.tolerance.job import HIGHER_IS_BETTER, Job, nominal_metrics, scalar_metric
@@ -38,6 +39,9 @@ def tolerance_report(model: Model, settings: Any, *, scheduler: str | None, work
     unit = METRIC_UNITS[job.metric]
     nominal = nominal_metrics(job)
     m0 = float(scalar_metric(nominal, job.metric)[0])
+    if not math.isfinite(m0):
+        raise LensoptError(f"the nominal {job.metric} cannot be computed: {_why_not_finite(job, m0)}",
+                           path="tolerance.metric", got=m0)
     report: dict[str, Any] = {
         "lens": model.spec.name, "metric": job.metric, "unit": unit, "higher_is_better": HIGHER_IS_BETTER[job.metric],
         "sampling": settings.sampling, "compensator": settings.compensator, "seed": settings.seed,
@@ -72,6 +76,18 @@ def tolerance_report(model: Model, settings: Any, *, scheduler: str | None, work
         out_dir.mkdir(parents=True, exist_ok=True)
         _plots(out_dir, report, None, rows, job.metric, unit, model.spec.name)
     return report
+
+
+def _why_not_finite(job: Job, m0: float) -> str:
+    """Why the nominal metric ``m0`` is not a finite number (one line)."""
+    if job.metric == "psnr" and job.psnr is not None:
+        if m0 == math.inf:
+            return ("the nominal captures equal their scenes (PSNR ∞): the lens blurs less than a pixel at "
+                    "tolerance.psnr_patch; add noise (tolerance.psnr_noise) or score another metric")
+        from lensopt.tolerance.psnr import psnr_failure
+
+        return psnr_failure(job.psnr, job.lens) or "the nominal lens could not be imaged"
+    return "the nominal lens's rays fail (trace it with lensopt trace)"
 
 
 def _sensitivity(job: Job, nominal: dict[str, np.ndarray], m0: float, inverse_delta: float | None,

@@ -23,7 +23,8 @@ from lensopt.imaging.rgb import RULE as RGB_RULE
 from lensopt.imaging.rgb import rgb_weights_from_spectrum
 from lensopt.imaging.scene import Region, Sensor
 
-__all__ = ["Effects", "PlanOptions", "ScenePlan", "parse_effects", "make_plan", "channel_weights", "EFFECT_NAMES"]
+__all__ = ["Effects", "PlanOptions", "ScenePlan", "parse_effects", "make_plan", "channel_weights", "lens_colour",
+           "EFFECT_NAMES"]
 
 EFFECT_NAMES = ("convolution", "diffraction", "distortion", "relative_illumination", "noise")
 _ALIASES = {"ri": "relative_illumination", "vignetting": "relative_illumination", "blur": "convolution",
@@ -140,6 +141,14 @@ def channel_weights(spectrum: Any, channels: int, wavelengths_nm: list[float]) -
         return w, ["R", "G", "B"], "no spectrum.rgb_weights: the 3 wavelengths taken as R, G, B (longest first)"
     w = rgb_weights_from_spectrum(wavelengths_nm, spectrum.weights_or_uniform, path="spectrum")
     return w, ["R", "G", "B"], f"no spectrum.rgb_weights: {RGB_RULE}"
+
+
+def lens_colour(spectrum: Any) -> tuple[np.ndarray, list[str], str]:
+    """The colour model of a lens, one for every command: W_w (n_w × 3), the channel names (R, G, B) and
+    where the weights came from — ``spectrum.rgb_weights``, else 3 wavelengths taken as R, G, B, else the
+    seed's split of the spectrum (S4.1.2, ``imaging.rgb``). Training, rendering, simulation of colour
+    images, evaluation, restoration and tolerancing all image in these channels."""
+    return channel_weights(spectrum, 3, list(spectrum.wavelengths_nm))
 
 
 def make_plan(

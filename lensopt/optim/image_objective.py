@@ -28,7 +28,7 @@ from lensopt.errors import LensoptError
 from lensopt.imaging.camera import Camera
 from lensopt.imaging.datasets import DeadLeaves, ImageFolder, sample_batch
 from lensopt.imaging.metrics import psnr_of_mse
-from lensopt.imaging.plan import channel_weights
+from lensopt.imaging.plan import lens_colour
 from lensopt.imaging.regions import stratified_draw, tile_grid
 from lensopt.imaging.render import (
     RenderSettings,
@@ -87,8 +87,7 @@ class ImageObjective:
         self.rel_field = torch.linspace(0.0, 1.0, image.fields, dtype=torch.float64)
         sampling = PupilSampling.parse(image.sampling, seed=image.seed, path="optimize.image.sampling")
         self.pupil, self.half = sampling.points(dtype=torch.float64, engine=self.engine), sampling.half
-        wl = list(camera.spectrum.wavelengths_nm)
-        cw, _, self.rgb_note = channel_weights(camera.spectrum, 3, wl)
+        cw, _, self.rgb_note = lens_colour(camera.spectrum)
         cw = torch.as_tensor(np.asarray(cw), dtype=torch.float64)
         # Wavelengths that no channel weighs (e.g. a reference wavelength of weight 0) are not rendered.
         self.keep = [i for i in range(cw.shape[0]) if float(cw[i].sum()) > 0]

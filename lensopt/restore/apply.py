@@ -11,6 +11,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
+from lensopt.checkpoint import CheckpointError
 from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.imaging.scene import Region
@@ -18,19 +19,40 @@ from lensopt.restore.capture import ImagingSetup, imaging_setup, lens_psfs, regi
 from lensopt.restore.checkpoint import load_network
 from lensopt.restore.model import ConditionedRestorer, mean_patch_psf
 
-__all__ = ["load_restorer", "restoration_hook", "restore_image"]
+__all__ = ["load_restorer", "restoration_hook", "restore_image", "match_channels"]
 
 
 def load_restorer(path: Path, model: Any, *, device: torch.device | str = "cpu",
                   option: str = "CKPT", engine: Engine | None = None) -> tuple[ConditionedRestorer, ImagingSetup, int]:
     """The network of a checkpoint for ``model`` (a built lens spec: ``lensopt.spec.Model``), on ``device``,
-    with the imaging set-up it was trained with and its tile size (``restore_image``'s ``tile``)."""
+    with the imaging set-up it was trained with and its tile size (``restore_image``'s ``tile``).
+
+    Refused (one line naming both) unless the network was trained for this lens structure and restores
+    the channels of the lens's colour model (``imaging.plan.lens_colour``)."""
     net, ck = load_network(path, model.spec, device=device, option=option)
     im = ck.meta.get("settings", {}).get("imaging", {})
     setup = imaging_setup(model.camera(), patch=16, fields=int(im.get("fields", 9)),
                           sampling=im.get("sampling", "rings:8"), psf_size=int(im.get("psf_size", 31)),
                           grid=tuple(im.get("grid", (3, 3))), engine=engine)
+    if net.config.channels != setup.channels:
+        raise CheckpointError(f"its network restores {net.config.channels}-channel images, but the lens images in "
+                              f"{setup.channels} channels ({setup.colour}); train it again with this lensopt",
+                              path=option, got=str(path))
     return net, setup, int(im.get("patch", 256))
+
+
+def match_channels(image: Tensor, channels: int) -> tuple[Tensor, str | None]:
+    """``image`` (C, H, W) in ``channels`` channels, and a notice when it was converted (None if not):
+    gray (1 channel) → R = G = B; colour → gray as the mean of its channels."""
+    c = image.shape[0]
+    if c == channels:
+        return image, None
+    if c == 1:
+        return image.expand(channels, -1, -1).contiguous(), (f"a 1-channel (gray) capture: restored as {channels} "
+                                                             "equal channels")
+    if channels == 1:
+        return image.mean(0, keepdim=True), f"a {c}-channel capture: restored as its mean (1 channel)"
+    raise LensoptError(f"cannot convert a {c}-channel capture to the network's {channels} channels", path="IMAGE")
 
 
 def restoration_hook(model: Any, path: Path, *, option: str = "--irm",
@@ -41,11 +63,10 @@ def restoration_hook(model: Any, path: Path, *, option: str = "--irm",
     net, setup, tile = load_restorer(path, model, device=device, option=option, engine=engine)
 
     def hook(capture: Tensor, info: dict[str, Any]) -> Tensor:
-        if capture.shape[1] != net.config.channels:
-            raise LensoptError(f"the network restores {net.config.channels}-channel images", path=option,
-                               got=f"{capture.shape[1]} channels")
-        out = restore_image(net, model.lens, model.system, setup, capture[0].to(device), info["region"], tile=tile)
-        return out[None].cpu()
+        x, _ = match_channels(capture[0], net.config.channels)
+        out = restore_image(net, model.lens, model.system, setup, x.to(device), info["region"], tile=tile)
+        back, _ = match_channels(out, capture.shape[1])
+        return back[None].cpu()
 
     return hook
 

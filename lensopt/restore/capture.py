@@ -16,7 +16,7 @@ from lensopt.errors import LensoptError
 from lensopt.imaging.camera import Camera
 from lensopt.imaging.convolve import overlap_add_convolve
 from lensopt.imaging.datasets import DeadLeaves, ImageFolder, sample_batch
-from lensopt.imaging.plan import channel_weights as plan_channel_weights
+from lensopt.imaging.plan import lens_colour
 from lensopt.imaging.psf_grid import build_psf_grid, cell_centers_mm, field_weights
 from lensopt.imaging.regions import TileGrid, stratified_draw, tile_grid
 from lensopt.imaging.render import RenderSettings, psfs_from_spots, trace_spots
@@ -38,9 +38,10 @@ class ImagingSetup:
         sensor: the sensor; tiles: its patch-sized tiles sorted centre → corner.
         rel_field: (F,) relative fields whose PSFs are traced (0 … 1 of the system's field).
         sampling: pupil sampling of the PSF rays.
-        channel_weights: (W, C) wavelength → channel weights.
+        channel_weights: (W, C) wavelength → channel weights (``imaging.plan.lens_colour``).
         settings: PSF size, sub-tile grid, overlap, kernel, noise σ.
-        channels: image channels C (3: RGB; 1: the spectrum summed into one channel).
+        channels: image channels C (3: R, G, B, the lens's colour model).
+        colour: where the channel weights came from (``lens_colour``'s text).
         sampling_text: ``sampling`` as given (``rings:8``).
         engine: trace backend and memory budget of the PSF rays (default ``Engine()``).
     """
@@ -53,6 +54,7 @@ class ImagingSetup:
     settings: RenderSettings
     channels: int
     sampling_text: str = "rings:8"
+    colour: str = ""
     engine: Engine | None = None
 
     @property
@@ -64,7 +66,7 @@ class ImagingSetup:
         return {"patch": self.patch, "sampling": self.sampling_text, "sensor": [self.sensor.width, self.sensor.height],
                 "fields": len(self.rel_field),
                 "psf_size": s.psf_size, "grid": list(s.grid), "overlap": s.overlap, "channels": self.channels,
-                "noise_sigma": s.noise_sigma}
+                "noise_sigma": s.noise_sigma, "colour": self.colour}
 
 
 def imaging_setup(camera: Camera, *, patch: int, fields: int = 9, sampling: str = "rings:8", psf_size: int = 31,
@@ -72,22 +74,21 @@ def imaging_setup(camera: Camera, *, patch: int, fields: int = 9, sampling: str 
                   dtype: torch.dtype = torch.float64, device: torch.device | str | None = None,
                   engine: Engine | None = None) -> ImagingSetup:
     """The setup for a lens on its sensor (``lensopt.spec.camera_of(model)`` / ``model.camera()``): the
-    sensor's pitch and resolution are required; RGB if the spectrum gives ``rgb_weights`` or has 3
-    wavelengths, else one channel."""
+    sensor's pitch and resolution are required; the channels are the lens's colour model
+    (``imaging.plan.lens_colour``: R, G, B from ``rgb_weights`` or the spectrum), as ``simulate`` and
+    ``evaluate`` render."""
     if camera.pixel_pitch_um is None or camera.resolution is None:
         raise LensoptError("needs pixel_pitch_um and resolution to simulate captures", path="sensor")
     w, h = camera.resolution
     sensor = Sensor(camera.pixel_pitch_um * 1e-3, int(w), int(h))
-    wl = list(camera.spectrum.wavelengths_nm)
-    channels = 3 if (camera.spectrum.rgb_weights is not None or len(wl) == 3) else 1
-    cw, _, _ = plan_channel_weights(camera.spectrum, channels, wl)
+    cw, names, colour = lens_colour(camera.spectrum)
     settings = RenderSettings(psf_size=psf_size, grid=grid, noise_sigma=noise_sigma, diffraction=diffraction)
     rel = torch.linspace(0.0, 1.0, fields, dtype=dtype, device=device) if fields > 1 else torch.zeros(
         1, dtype=dtype, device=device)
     return ImagingSetup(sensor=sensor, tiles=tile_grid(sensor, patch, option="--patch"), rel_field=rel,
                         sampling=PupilSampling.parse(sampling, seed=0, path="--sampling"),
                         channel_weights=torch.as_tensor(cw, dtype=dtype, device=device), settings=settings,
-                        channels=channels, sampling_text=sampling, engine=engine)
+                        channels=len(names), sampling_text=sampling, colour=colour, engine=engine)
 
 
 def lens_psfs(lens: Lens, system: System, setup: ImagingSetup) -> tuple[Tensor, Tensor]:
@@ -135,8 +136,8 @@ def draw_batch(source: Source, setup: ImagingSetup, batch: int, gens: dict[str, 
                ) -> tuple[Tensor, Tensor, Tensor]:
     """(scenes (B, C, P, P), tile indices (B,), standard normal noise (B, C, P, P)) from the generators."""
     scenes = sample_batch(source, batch, setup.patch, gens["scenes"], dtype=dtype)
-    if setup.channels == 1 and scenes.shape[1] != 1:
-        scenes = scenes.mean(1, keepdim=True)
+    if scenes.shape[1] != setup.channels:  # gray scenes (1 channel) become R = G = B
+        scenes = scenes.expand(-1, setup.channels, -1, -1).contiguous()
     tiles = stratified_draw(len(setup.tiles), batch, gens["tiles"])
     noise = torch.randn(scenes.shape, generator=gens["noise"], dtype=dtype)
     return scenes.to(device), tiles, noise.to(device)

@@ -15,6 +15,7 @@ from torch import Tensor
 from lensopt.checkpoint import (
     Checkpoint,
     CheckpointError,
+    describe_structure,
     fingerprint,
     flatten_optimizer,
     lens_structure,
@@ -86,8 +87,11 @@ def load_network(path: Path, spec: Any, *, device: torch.device | str = "cpu",
     net = RestoreConfig.from_dict(probe.meta.get("network_config", {}))
     fp = network_fingerprint(spec, net)
     if probe.fingerprint != fp:
-        raise CheckpointError("was written for another lens structure (surface kinds, stop or number of wavelengths "
-                              "differ)", path=option, got=str(path))
+        mine = lens_structure(spec)
+        theirs = probe.meta.get("lens_structure")
+        raise CheckpointError(f"its network was trained for {describe_structure(theirs)}, but the lens has "
+                              f"{describe_structure(mine)} (surface kinds, stop and number of wavelengths must match)",
+                              path=option, got=str(path))
     model = ConditionedRestorer(net).to(device)
     try:
         model.load_state_dict({k: v.to(device) for k, v in probe.network.items()})

@@ -24,7 +24,7 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from lensopt.checkpoint import Checkpoint, CheckpointError, save_checkpoint
+from lensopt.checkpoint import Checkpoint, CheckpointError, lens_structure, save_checkpoint
 from lensopt.errors import LensoptError
 from lensopt.imaging.metrics import psnr_batch
 from lensopt.optics.lens import Lens, System
@@ -243,6 +243,8 @@ def train_irm(
         network, state, info = run_state(r)
         info["settings"] = settings
         info["network_config"] = net.to_dict()
+        info["lens_structure"] = lens_structure(spec)
+        info["colour"] = {"channels": setup.channels, "weights": setup.colour}
         save_checkpoint(output, Checkpoint(kind="train-irm", step=r.step, lens_json=lens_json, network=network,
                                            state=state, meta=info, fingerprint=fp))
 

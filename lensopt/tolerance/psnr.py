@@ -36,7 +36,7 @@ from lensopt.imaging.plan import PlanOptions
 from lensopt.optics.lens import Lens
 from lensopt.tolerance.model import TrialParams, params_lens
 
-__all__ = ["PsnrSetup", "trial_lens", "trial_psnr"]
+__all__ = ["PsnrSetup", "trial_lens", "trial_psnr", "psnr_failure"]
 
 Restore = Callable[[Tensor, dict[str, Any]], Tensor]
 
@@ -96,7 +96,9 @@ def trial_lens(lens: Lens, placement: Any, params: TrialParams, focus_shift: flo
 def trial_psnr(setup: PsnrSetup, lenses: list[Lens]) -> dict[str, np.ndarray]:
     """(K,) ``psnr_pre`` (dB) and, with a restoration hook, ``psnr_post`` of each lens.
 
-    A trial whose simulation fails (e.g. every ray of a field lost) scores −inf (the worst; never NaN).
+    A trial whose simulation fails (e.g. every ray of a field lost) scores −inf (the worst; never NaN;
+    ``psnr_failure`` says why). An error of the restoration hook is not a bad trial but a network that does
+    not fit the lens: it is raised.
     """
     scenes, names, desc = scene_source(None, count=setup.count, patch=setup.patch, seed=setup.seed)
     kw = setup.evaluate_kwargs()
@@ -108,10 +110,15 @@ def trial_psnr(setup: PsnrSetup, lenses: list[Lens]) -> dict[str, np.ndarray]:
         if setup.restore is not None:
             def hook(capture: Tensor, info: dict[str, Any], _c: dict[int, Tensor] = captures) -> Tensor:
                 _c[int(info["index"])] = capture.clone()
-                return setup.restore(capture, info)
+                try:
+                    return setup.restore(capture, info)
+                except Exception as err:
+                    raise _HookError(err) from err
         try:
             with torch.no_grad():
                 ev = evaluate_images(camera, scenes, names, images=desc, restore=hook, **kw)
+        except _HookError as err:
+            raise err.error from None
         except Exception:  # noqa: BLE001 — a broken trial lens is a bad trial, not a crashed run
             pre.append(-math.inf)
             post.append(-math.inf)
@@ -125,6 +132,27 @@ def trial_psnr(setup: PsnrSetup, lenses: list[Lens]) -> dict[str, np.ndarray]:
     if setup.restore is not None:
         out["psnr_post"] = np.asarray(post, dtype=np.float64)
     return out
+
+
+class _HookError(Exception):
+    """An error of the restoration hook (carried through ``imaging.evaluate`` to be raised as is)."""
+
+    def __init__(self, error: Exception) -> None:
+        super().__init__(str(error))
+        self.error = error
+
+
+def psnr_failure(setup: PsnrSetup, lens: Lens) -> str | None:
+    """Why ``lens`` cannot be imaged for the psnr metric (its error, one line), or None if it can: what
+    ``trial_psnr`` scores as −inf, explained (run again, so only when a score is not finite)."""
+    scenes, names, desc = scene_source(None, count=setup.count, patch=setup.patch, seed=setup.seed)
+    camera = dataclasses.replace(setup.camera, lens=lens)
+    try:
+        with torch.no_grad():
+            evaluate_images(camera, scenes, names, images=desc, restore=setup.restore, **setup.evaluate_kwargs())
+    except Exception as err:  # noqa: BLE001 — the reason is the message
+        return (str(err).strip().splitlines() or [type(err).__name__])[0]
+    return None
 
 
 def _pre_from_captures(scenes: Callable[[int], Tensor], captures: dict[int, Tensor], count: int) -> float:

@@ -168,7 +168,10 @@ def test_restore_command(tiny_lens: Path, other_lens: Path, tmp_path: Path) -> N
     got, info = read_image(out)
     assert got.shape == (40, 56, 3)
     r = runner.invoke(app, ["restore", str(other_lens), str(ck), str(src), "-o", str(tmp_path / "x.png")])
-    assert r.exit_code == 2 and "another lens structure" in r.output
+    # both structures named: the network's (6 spheres) and the lens's (conic first surface)
+    assert r.exit_code == 2 and "trained for 6 surfaces (sphere×6)" in r.output, r.output
+    assert "the lens has 6 surfaces (conic, sphere×5)" in r.output
+    assert len(r.output.strip().splitlines()) == 1
     assert not (tmp_path / "x.png").exists()
 
 

@@ -140,3 +140,25 @@ def test_cli_optimize_restored_and_errors(tmp_path: Path) -> None:
     if not torch.cuda.is_available():
         r = runner.invoke(app, ["optimize", str(spec), "-o", str(tmp_path / "c.json"), "--device", "cuda"])
         assert r.exit_code == 2 and "CUDA" in r.output and not (tmp_path / "c.json").exists()
+
+
+def test_optimize_restored_without_checkpoint_writes_the_network_beside_the_lens(tmp_path: Path) -> None:
+    # issue 27: objective = "restored" without --checkpoint used to throw the trained network away
+    runner = CliRunner()
+    spec = tmp_path / "joint.json"
+    spec.write_text(json.dumps(joint_data(steps=1)))
+    out = tmp_path / "lens.json"
+    r = runner.invoke(app, ["optimize", str(spec), "-o", str(out), "--json"])
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.output)
+    beside = tmp_path / "lens.irm"
+    assert s["checkpoint"] == str(beside) and load_checkpoint(beside).kind == "joint"
+    # the network written is the one restore/evaluate --irm load for the written lens
+    from lensopt.restore.apply import load_restorer
+    from lensopt.spec import build, load_spec
+
+    net, setup, _ = load_restorer(beside, build(load_spec(out)))
+    assert net.config.channels == setup.channels == 3
+    # a second run with the same -o does not overwrite it silently
+    r = runner.invoke(app, ["optimize", str(spec), "-o", str(out)])
+    assert r.exit_code == 2 and "--resume" in r.output and len(r.output.strip().splitlines()) == 1
