@@ -41,7 +41,7 @@ if TYPE_CHECKING:
     from lensopt.spec import Model
 
 __all__ = ["AimOpt", "AimStepsOpt", "BackendOpt", "DeviceOpt", "EX_INTERNAL", "EX_VIOLATED", "JsonOpt", "LensArg",
-           "LensoptGroup", "check_scheduler",
+           "LensoptGroup", "SchedulerOpt", "WorkersOpt", "check_scheduler",
            "LowerLevelFormatter", "SamplingOpt", "SeedOpt", "check_aim", "check_aim_steps", "check_output",
            "check_seed", "console", "err_console", "handle_errors", "load_model", "parse_frequencies",
            "invocation", "make_engine", "parse_sampling", "print_json"]
@@ -71,6 +71,11 @@ AimStepsOpt = Annotated[int | None, typer.Option("--aim-steps",
 SeedOpt = Annotated[int, typer.Option("--seed", callback=check_seed,
                                       help="Seed of every random draw (pupil jitter), 0 to 2**63 - 1.")]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object instead of tables.")]
+SchedulerOpt = Annotated[str, typer.Option("--scheduler", help="auto (serial unless the tasks left after the first "
+                                           "are estimated at 30 s or more and 2+ cores are free: then a "
+                                           "LocalCluster), local (a Dask LocalCluster of --workers processes), "
+                                           "serial, or a Dask scheduler address.")]
+WorkersOpt = Annotated[int, typer.Option("--workers", min=1, max=64, help="LocalCluster workers.")]
 DeviceOpt = Annotated[str, typer.Option("--device", help="cpu | cuda | cuda:N | auto: where the lens is traced and the "
                                         "images are computed.")]
 BackendOpt = Annotated[str, typer.Option(

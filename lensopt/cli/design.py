@@ -15,7 +15,17 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
-from lensopt.cli.common import JsonOpt, SeedOpt, check_scheduler, console, err_console, handle_errors, print_json
+from lensopt.cli.common import (
+    JsonOpt,
+    SchedulerOpt,
+    SeedOpt,
+    WorkersOpt,
+    check_scheduler,
+    console,
+    err_console,
+    handle_errors,
+    print_json,
+)
 from lensopt.cli.signals import report_signal, signal_word, state
 
 if TYPE_CHECKING:
@@ -142,11 +152,8 @@ def design(
                                               "spec's).")] = None,
     budget_cpu_h: Annotated[float | None, typer.Option("--budget-cpu-h", help="Stop starting rounds once the "
                                                        "starts used this many CPU-hours.")] = None,
-    scheduler: Annotated[str, typer.Option("--scheduler", help="auto (serial unless the starts left after "
-                                           "the first are estimated at 30 s or more and 2+ cores are free: "
-                                           "then a LocalCluster), local (a Dask LocalCluster of --workers "
-                                           "processes), serial, or a Dask scheduler address.")] = "auto",
-    workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="LocalCluster workers.")] = 2,
+    scheduler: SchedulerOpt = "auto",
+    workers: WorkersOpt = 2,
     restart: Annotated[bool, typer.Option("--restart", help="Start over in a folder that holds another run "
                                           "(its files are removed).")] = False,
     esr_sampling: Annotated[str, typer.Option("--esr-sampling", help="Pupil sampling of the reported ESR.")]

@@ -16,7 +16,9 @@ from rich.table import Table
 
 from lensopt.cli.common import (
     JsonOpt,
+    SchedulerOpt,
     SeedOpt,
+    WorkersOpt,
     check_scheduler,
     console,
     err_console,
@@ -167,11 +169,8 @@ def sweep(
                                            "the scaled variables for starts ≥ 1.")] = 0.05,
     steps: Annotated[int | None, typer.Option("--steps", min=1, help="Optimizer steps (default: the "
                                               "spec's).")] = None,
-    scheduler: Annotated[str, typer.Option("--scheduler", help="auto (serial unless the tasks left after "
-                                           "the first are estimated at 30 s or more and 2+ cores are free: "
-                                           "then a LocalCluster), local (a Dask LocalCluster of --workers "
-                                           "processes), serial, or a Dask scheduler address.")] = "auto",
-    workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="LocalCluster workers.")] = 2,
+    scheduler: SchedulerOpt = "auto",
+    workers: WorkersOpt = 2,
     restart: Annotated[bool, typer.Option("--restart", help="Start over in a folder that holds another "
                                           "sweep (its files are removed).")] = False,
     esr_sampling: Annotated[str, typer.Option("--esr-sampling", help="Pupil sampling of the reported ESR.")]

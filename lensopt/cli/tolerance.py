@@ -13,6 +13,9 @@ from rich.table import Table
 from lensopt.cli.common import (
     JsonOpt,
     LensArg,
+    SchedulerOpt,
+    WorkersOpt,
+    check_scheduler,
     check_seed,
     console,
     handle_errors,
@@ -51,11 +54,8 @@ def tolerance_cmd(
                                             "its own (decentered) stop centre.")] = None,
     compensator: Annotated[str | None, typer.Option("--compensator", help="focus | lm | none (lm: "
                                                     "the spec's variables by a few LM steps).")] = None,
-    scheduler: Annotated[str, typer.Option("--scheduler", help="auto (serial unless the trials left after "
-                                           "the first chunk are estimated at 30 s or more and 2+ cores are "
-                                           "free: then a LocalCluster), local (a Dask LocalCluster of "
-                                           "--workers), serial, or a Dask scheduler address.")] = "auto",
-    workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="LocalCluster workers.")] = 2,
+    scheduler: SchedulerOpt = "auto",
+    workers: WorkersOpt = 2,
     output_dir: Annotated[Path | None, typer.Option("--output-dir", "-o", help="Folder for plots (CDF, "
                                                     "histogram, sensitivity) and the worst trials.")] = None,
     worst: Annotated[int, typer.Option("--worst", min=0, max=100, help="Worst trials saved as lens JSON.")] = 3,
@@ -75,7 +75,7 @@ def tolerance_cmd(
     settings = _settings(model, tolerances, profile, {
         "profile": profile, "trials": trials, "seed": seed, "metric": metric, "mtf_frequency": mtf_frequency,
         "sampling": sampling, "compensator": compensator, "aim": aim, "fields": fields})
-    sched = None if scheduler == "serial" else scheduler
+    sched = check_scheduler(scheduler)
     hook = None
     if irm is not None:
         if settings.metric != "psnr":
