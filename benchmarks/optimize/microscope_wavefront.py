@@ -3,7 +3,7 @@ S12 requirement on the dense ray sample (``analysis.requirements.check_requireme
 ``benchmarks/studies/studies_report.py`` and ``tests/test_lenses.py`` check the shipped lens), the Strehl
 ratio per field (from the diffraction PSF and Maréchal's estimate, per wavelength and polychromatic), the RMS
 wavefront error per field, the MTF against field, and the ESR on the seed's measure; with the CPU time of the
-run that made it (``<lens>.run.json`` beside it, written by ``microscope_wavefront_run.py``).
+run that made it (``<lens>.run.json`` beside it, written by ``run`` mode).
 
     OMP_NUM_THREADS=1 PYTHONPATH=. .venv/bin/python benchmarks/optimize/microscope_wavefront.py \\
         lenses/microscope_8p_wd12.json out/mw_spot_spec.json out/mw_wavefront_spec.json ... \\
@@ -18,6 +18,25 @@ Definitions (all from ``lensopt.analysis``; pupil: a 64 × 64 equal-area grid):
   the peak searched as ``strehl.peak_strehl`` searches (nested 21 × 21 grids) over ± (lateral colour span +
   3 Airy radii). Polychromatic Maréchal: Σ ŵ_λ exp(−(2πσ_λ)²) (no lateral colour). RMS (poly): √Σ ŵ_λ σ_λ².
 - MTF: ``analysis.mtf_field.mtf_vs_field`` (polychromatic, tangential and sagittal), method ``--mtf-method``.
+
+``run`` mode: one optimization run, timed by its own CPU time:
+
+timed by this process's CPU time (``time.process_time``, one intra-op thread).
+
+    OMP_NUM_THREADS=1 PYTHONPATH=. .venv/bin/python benchmarks/optimize/microscope_wavefront.py \\
+        run --merit wavefront --start spec --steps 290 -o out/mw_wavefront_spec.json
+
+``--merit spot``: the spot spec (``specs/microscope_8p_wd12.toml``); ``wavefront``: its wavefront twin
+(``specs/microscope_8p_wd12_wavefront.toml``: the same lens, constraints and variables, the merit its
+``[optimize.wavefront]`` and a small TRA). ``--start spec``: from the spec's crude start, with its schedules
+and the glass binding at mid-run; ``--start shipped``: continuing from ``lenses/microscope_8p_wd12.json``
+(glasses already bound) at full constraint weight (``--full-weight``), the shipped lens's own [optimize]
+for ``spot``, and that [optimize] with the twin's ``tra`` and ``wavefront`` for ``wavefront``; there no
+schedule depends on the step count, so ``--cpu-budget S`` (with a large ``--steps``) ends both merits' runs
+after the same CPU seconds (the step that crosses S completes). Writes the
+lens (``-o``) and beside it ``<out>.run.json``: steps, stop reason, CPU seconds, wall seconds.
+The step counts of the recorded runs were chosen so that each run takes about the same CPU time
+(benchmarks/README.md, optimize).
 """
 
 from __future__ import annotations
@@ -25,6 +44,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import sys
 import time
 from pathlib import Path
 
@@ -36,11 +57,28 @@ from lensopt.analysis.requirements import check_requirements, failed, table_s12
 from lensopt.analysis.spot import seed_esr
 from lensopt.analysis.strehl import strehl
 from lensopt.analysis.wavefront import map_grid, trace_to_sphere
+from lensopt.design import optimize
 from lensopt.files import write_text_atomic
 from lensopt.optics.paraxial import first_order
-from lensopt.spec import build, load_spec
+from lensopt.spec import build, dump_json, load_spec
 
 FIELDS = [0.0, 0.25, 0.5, 0.75, 1.0]
+ROOT = Path(__file__).resolve().parents[2]
+SPOT = ROOT / "specs" / "microscope_8p_wd12.toml"
+WAVEFRONT = ROOT / "specs" / "microscope_8p_wd12_wavefront.toml"
+SHIPPED = ROOT / "lenses" / "microscope_8p_wd12.json"
+
+
+def start_spec(merit: str, start: str):  # noqa: ANN201 - a LensSpec
+    if start == "spec":
+        return load_spec(SPOT if merit == "spot" else WAVEFRONT)
+    spec = load_spec(SHIPPED)
+    if merit == "wavefront":
+        twin = load_spec(WAVEFRONT).optimize
+        spec.optimize = spec.optimize.model_copy(update={"tra": twin.tra, "wavefront": twin.wavefront})
+    return spec
+
+
 
 
 def requirements(spec) -> dict:  # noqa: ANN001
@@ -82,7 +120,8 @@ def poly_strehl(lens, system, rel: torch.Tensor, n: int, levels: int = 4, points
                 perfect = float(amp.sum()) ** 2
                 if perfect <= 0:
                     continue
-                inten = debye_intensity(path[f, j], st.towards[f, j, :, 0] * n_img[j], st.towards[f, j, :, 1] * n_img[j],
+                ax, ay = st.towards[f, j, :, 0] * n_img[j], st.towards[f, j, :, 1] * n_img[j]
+                inten = debye_intensity(path[f, j], ax, ay,
                                         amp, 2.0 * math.pi / (lam * 1e-3), g + cx, g + cy)
                 total += float(ww[j]) * inten / perfect
             i = int(torch.argmax(total))
@@ -141,18 +180,54 @@ def tables(results: dict) -> str:
                     + " / ".join(f"{x:.3f}" for x in r["strehl_psf_poly"]) + " |")
     nu = results["frequencies"]
     head = " | ".join(f"MTF {v:g} T / S" for v in nu)
-    rows += ["", f"| lens | field | Strehl poly PSF | mean of λ PSF / Maréchal | 550 nm PSF / Maréchal | RMS 550 | {head} |",
+    rows += ["", "| lens | field | Strehl poly PSF | mean of λ PSF / Maréchal | 550 nm PSF / Maréchal | RMS 550 | "
+             f"{head} |",
              "| --- | ---: | ---: | --- | --- | ---: |" + " --- |" * len(nu)]
     for name, r in results["lenses"].items():
         for i, f in enumerate(r["fields"]):
-            mtf = " | ".join(f"{r['mtf']['tangential'][i][k]:.3f} / {r['mtf']['sagittal'][i][k]:.3f}" for k in range(len(nu)))
+            t, sa = r["mtf"]["tangential"][i], r["mtf"]["sagittal"][i]
+            mtf = " | ".join(f"{t[k]:.3f} / {sa[k]:.3f}" for k in range(len(nu)))
             rows.append(f"| `{name}` | {f:g} | {r['strehl_psf_poly'][i]:.3f} | {r['strehl_psf_mean'][i]:.3f} / "
-                        f"{r['strehl_marechal_mean'][i]:.3f} | {r['strehl_psf_ref'][i]:.3f} / {r['strehl_marechal_ref'][i]:.3f} "
+                        f"{r['strehl_marechal_mean'][i]:.3f} | {r['strehl_psf_ref'][i]:.3f} / "
+                        f"{r['strehl_marechal_ref'][i]:.3f} "
                         f"| {r['rms_waves_ref'][i]:.3f} | {mtf} |")
     return "\n".join(rows)
 
 
+def run_main(argv: list[str]) -> None:
+    """``run``: one timed optimization run (module docstring)."""
+    ap = argparse.ArgumentParser(description="one timed run")
+    ap.add_argument("--merit", choices=["spot", "wavefront"], required=True)
+    ap.add_argument("--start", choices=["spec", "shipped"], required=True)
+    ap.add_argument("--steps", type=int, required=True)
+    ap.add_argument("--cpu-budget", type=float, default=None,
+                    help="stop once the run has used this many CPU seconds (the lens so far is kept)")
+    ap.add_argument("-o", "--output", type=Path, required=True)
+    a = ap.parse_args(argv)
+    torch.set_num_threads(1)
+    spec = start_spec(a.merit, a.start)
+    c0, w0 = time.process_time(), time.perf_counter()
+
+    def stop_at_budget(_progress) -> None:  # noqa: ANN001 - a Progress
+        if a.cpu_budget is not None and time.process_time() - c0 >= a.cpu_budget:
+            raise KeyboardInterrupt  # run_problem keeps the lens so far, as on Ctrl-C
+
+    res = optimize(spec, steps=a.steps, seed=0, full_weight=a.start == "shipped", callback=stop_at_budget)
+    cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+    a.output.parent.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(a.output, dump_json(res.spec))
+    rec = {"merit": a.merit, "start": a.start, "steps_asked": a.steps, "cpu_budget_s": a.cpu_budget, "steps": res.steps,
+           "stop_reason": res.stop_reason, "cpu_s": round(cpu, 2), "wall_s": round(wall, 2),
+           "threads": torch.get_num_threads(), "omp_num_threads": os.environ.get("OMP_NUM_THREADS"),
+           "bound": [str(b) for b in res.bound], "warning": res.warning}
+    write_text_atomic(a.output.with_suffix(".run.json"), json.dumps(rec, indent=1) + "\n")
+    print(json.dumps(rec))
+
+
 def main() -> None:
+    if sys.argv[1:2] == ["run"]:
+        run_main(sys.argv[2:])
+        return
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("lenses", nargs="*", type=Path)
     ap.add_argument("--tables", type=Path, help="print the README tables of this results JSON and stop")
@@ -174,9 +249,11 @@ def main() -> None:
         print(f"{p.stem}: req {'met' if r['requirements']['met'] else r['requirements']['failed']}, "
               f"ESR {r['seed_esr_um']:.3f} um, run CPU {cpu} s, analysis {r['analysis_cpu_s']} s", flush=True)
         for i, f in enumerate(FIELDS):
-            print(f"  field {f:.2f}: Strehl poly PSF {r['strehl_psf_poly'][i]:.3f}  mean PSF {r['strehl_psf_mean'][i]:.3f}"
+            print(f"  field {f:.2f}: Strehl poly PSF {r['strehl_psf_poly'][i]:.3f}"
+                  f"  mean PSF {r['strehl_psf_mean'][i]:.3f}"
                   f"  Marechal {r['strehl_marechal_mean'][i]:.3f}  550: {r['strehl_psf_ref'][i]:.3f}/"
-                  f"{r['strehl_marechal_ref'][i]:.3f}  RMS poly {r['rms_waves_poly'][i]:.3f} 550 {r['rms_waves_ref'][i]:.3f}"
+                  f"{r['strehl_marechal_ref'][i]:.3f}  RMS poly {r['rms_waves_poly'][i]:.3f}"
+                  f" 550 {r['rms_waves_ref'][i]:.3f}"
                   f"  MTF T " + " ".join(f"{x:.3f}" for x in r["mtf"]["tangential"][i])
                   + " S " + " ".join(f"{x:.3f}" for x in r["mtf"]["sagittal"][i]), flush=True)
     if a.json:
