@@ -25,6 +25,8 @@ were made for, so that a change to the tracer or the optimizer that would break 
   then 1500 and 3 × 3000 more steps at full constraint weight (benchmarks/studies/full_weight_spec.py): every
   Table S12 requirement met on a dense ray sample, recommended Ohara glasses; ESR 3.57 µm against the
   seed's ≈ 0.85 µm (benchmarks/README.md, studies).
+- ``microscope_8p_wd12_wavefront.json``: that lens after 244 more LM steps (240 CPU s) on the wavefront merit
+  (``specs/microscope_8p_wd12_wavefront.toml``'s); held in ``tests/test_lens_wavefront.py``.
 """
 
 from __future__ import annotations
