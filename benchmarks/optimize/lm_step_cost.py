@@ -44,7 +44,10 @@ def measure(spec: str, repeats: int, steps: int) -> dict:
 
     import lensopt
     from lensopt.design import build_problem
-    from lensopt.optim.driver import make_optimizer
+    try:
+        from lensopt.optim.driver import make_optimizer
+    except ImportError:  # a baseline from before optim/run.py became optim/driver.py
+        from lensopt.optim.run import make_optimizer
     from lensopt.spec import load_spec
 
     torch.set_num_threads(1)
