@@ -12,6 +12,13 @@ traces rays. ``save_figure`` writes a figure atomically, in the format its file 
     tolerance.py  tolerancing: CDF, histogram, sensitivity
     sweep.py      design sweeps
     accuracy.py   accuracy against time
+    opd.py        OPD fans (tangential, sagittal) per field
+    wavefront.py  wavefront maps with RMS, P-V and Strehl per field
+    field_curves.py  astigmatic field curves, distortion, lateral colour
+    focal_shift.py   chromatic focal shift against wavelength
+    encircled.py  encircled / ensquared energy per field
+    mtf_field.py  MTF against field at chosen frequencies
+    through_focus.py  MTF through focus
 """
 
 from lensopt.plot.fans import plot_fans
