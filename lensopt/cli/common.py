@@ -121,10 +121,31 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
+def _rank_prefix() -> str:
+    """``rank N: `` under torchrun with two or more processes (every rank reports its own error), else ``""``."""
+    try:
+        world, rank = int(os.environ.get("WORLD_SIZE", "1")), int(os.environ.get("RANK", "0"))
+    except ValueError:
+        return ""
+    return f"rank {rank}: " if world > 1 else ""
+
+
 def error_line(message: str) -> None:
-    """``error: message`` as one line on stderr (no markup, no wrapping)."""
-    err_console.print(f"[bold red]error:[/] {escape(_one_line(message))}", markup=True, highlight=False, soft_wrap=True,
-                      emoji=False)
+    """``error: message`` as one line on stderr (no markup, no wrapping; ``rank N: error: …`` under torchrun).
+    The line, newline included, goes out in one write and is flushed, so that the lines of processes sharing
+    the stream (torchrun's ranks) never run into each other."""
+    with err_console.capture() as captured:
+        err_console.print(f"{_rank_prefix()}[bold red]error:[/] {escape(_one_line(message))}", markup=True,
+                          highlight=False, soft_wrap=True, emoji=False)
+    line = captured.get()
+    if not line.endswith("\n"):
+        line += "\n"
+    stream = err_console.file
+    try:
+        stream.write(line)
+        stream.flush()
+    except BrokenPipeError:  # nobody reads stderr any more: the exit code still says it
+        pass
 
 
 def handle_errors(fn: F) -> F:

@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 
 from lensopt.files import atomic_path
 
-__all__ = ["wavelength_color", "field_color", "nice_length", "add_scale_bar", "save_figure", "new_figure"]
+__all__ = ["contrast_on_white", "relative_luminance", "wavelength_color", "field_color", "nice_length", "add_scale_bar", "save_figure", "new_figure"]
 
 #: Field colours of layouts (colour-blind-safe Okabe–Ito palette: blue, bluish green, vermillion, ...).
 FIELD_COLORS = ("#0072B2", "#009E73", "#D55E00", "#CC79A7", "#E69F00", "#56B4E9", "#000000", "#F0E442")
@@ -36,9 +36,26 @@ def new_figure(width_in: float, height_in: float) -> Figure:
     return fig
 
 
+#: Least WCAG contrast ratio of a wavelength colour against the white figure background (3:1 is WCAG's
+#: minimum for graphics; a small margin above it).
+MIN_CONTRAST = 3.2
+
+
+def relative_luminance(rgb: tuple[float, float, float]) -> float:
+    """WCAG 2 relative luminance of an sRGB colour (components 0…1)."""
+    lin = [c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4 for c in rgb]
+    return 0.2126 * lin[0] + 0.7152 * lin[1] + 0.0722 * lin[2]
+
+
+def contrast_on_white(rgb: tuple[float, float, float]) -> float:
+    """WCAG 2 contrast ratio of ``rgb`` against white: (1 + 0.05) / (L + 0.05), 1 … 21."""
+    return 1.05 / (relative_luminance(rgb) + 0.05)
+
+
 def wavelength_color(nm: float) -> tuple[float, float, float]:
     """An RGB colour for a wavelength in nm: the visible spectrum (after D. Bruton's approximation),
-    darkened for contrast on white; below 380 nm violet, above 700 nm dark red."""
+    darkened (same hue) until its contrast against white is at least ``MIN_CONTRAST`` (the yellows and
+    greens of 540–600 nm are otherwise nearly invisible on white); below 380 nm violet, above 700 nm dark red."""
     w = min(max(nm, 380.0), 700.0)
     if w < 440:
         r, g, b = (440 - w) / 60, 0.0, 1.0
@@ -55,8 +72,17 @@ def wavelength_color(nm: float) -> tuple[float, float, float]:
     if nm > 700:  # infrared: darker with distance
         fade = max(0.45, 1.0 - (nm - 700) / 600)
         r, g, b = r * fade, g * fade, b * fade
-    dark = 0.82 if 480 <= w <= 600 else 0.92  # greens and yellows are light on white
-    return (r * dark, g * dark, b * dark)
+    r, g, b = r * 0.92, g * 0.92, b * 0.92
+    if contrast_on_white((r, g, b)) >= MIN_CONTRAST:
+        return (r, g, b)
+    lo, hi = 0.0, 1.0  # scale factor: contrast falls as the factor grows; bisect for the largest that passes
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if contrast_on_white((r * mid, g * mid, b * mid)) >= MIN_CONTRAST:
+            lo = mid
+        else:
+            hi = mid
+    return (r * lo, g * lo, b * lo)
 
 
 def field_color(i: int) -> str:

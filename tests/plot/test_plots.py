@@ -135,3 +135,41 @@ def test_wavelength_colours_follow_the_spectrum():
     blue, green, red = (wavelength_color(nm) for nm in (460.0, 540.0, 650.0))
     assert np.argmax(blue) == 2 and np.argmax(green) == 1 and np.argmax(red) == 0
     assert all(0.0 <= c <= 1.0 for nm in (300.0, 400.0, 1000.0, 2000.0) for c in wavelength_color(nm))
+
+
+def _shipped_wavelengths_nm() -> list[float]:
+    from lensopt.spec.io import load_spec
+
+    root = Path(__file__).resolve().parents[2]
+    found: set[float] = set()
+    # Every spec and lens (not specs/stages: a stage starts from a run's output; not the check baseline).
+    for path in sorted([*(root / "specs").glob("*.toml"), *(root / "lenses").glob("*.json")]):
+        if path.name == "check_baseline.json":
+            continue
+        found.update(float(w) for w in load_spec(path).spectrum.wavelengths_nm)
+    return sorted(found)
+
+
+def test_wavelength_colours_have_contrast_on_white_for_every_shipped_spec():
+    # WCAG 2 relative luminance and contrast computed here from the definition, not from the library's helpers.
+    def lum(rgb):
+        lin = [c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4 for c in rgb]
+        return 0.2126 * lin[0] + 0.7152 * lin[1] + 0.0722 * lin[2]
+
+    wavelengths = _shipped_wavelengths_nm()
+    assert 587.6 in wavelengths and len(wavelengths) > 10
+    for nm in [*wavelengths, 380.0, 546.1, 587.6, 1000.0]:
+        rgb = wavelength_color(nm)
+        assert all(0.0 <= c <= 1.0 for c in rgb)
+        assert 1.05 / (lum(rgb) + 0.05) >= 3.0, (nm, rgb)
+    # The d line stays a yellow (red and green both present, no blue), not a brown-black.
+    r, g, b = wavelength_color(587.6)
+    assert b == 0.0 and r > 0.5 and g > 0.45
+
+
+def test_spot_dots_are_visible_and_scale_with_the_number_of_rays(cooke):
+    with torch.no_grad():
+        sparse = spot_diagram(cooke.lens, cooke.system, PupilSampling.parse("rings:6"))
+        dense = spot_diagram(cooke.lens, cooke.system, PupilSampling.parse("rings:24"))
+    size = [plot_spots(s).axes[0].collections[0].get_sizes()[0] for s in (sparse, dense)]
+    assert size[0] > size[1] >= 2.0  # pt²: the rings:24 dots were 0.6 pt² before (issue 29)
