@@ -6,12 +6,15 @@ them (``lensopt.optim`` never sees the spec; this layer sits above both).
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from typing import Any
 
 import torch
 
 from lensopt.engine import Engine
 from lensopt.errors import SpecError
+from lensopt.materials import CatalogGlass, Material, ModelGlass, notice
+from lensopt.materials.catalog import PLASTICS_VENDOR
 from lensopt.optim import settings as st
 from lensopt.optim.problem import Problem, ProblemSetup, SurfaceInfo
 from lensopt.optim.solves import Solve
@@ -20,7 +23,8 @@ from lensopt.spec import optim as so
 from lensopt.spec.build import build, camera_of
 from lensopt.spec.models import DiffractiveSurface, LensSpec
 
-__all__ = ["SpecProblem", "build_problem", "problem_setup", "settings_of", "resolve_solves", "with_varied_powers",
+__all__ = ["SpecProblem", "VENDOR_CATALOGS", "binding_catalog", "build_problem", "problem_setup", "settings_of",
+           "resolve_solves", "with_varied_powers",
            "declare_variables"]
 
 #: Which plain dataclass each pydantic settings model converts to (``settings_of``).
@@ -144,6 +148,65 @@ def declare_variables(spec: LensSpec) -> list[Declared]:
     return out
 
 
+#: The built-in design catalog of each vendor that has one (what its varied glasses bind to by default).
+VENDOR_CATALOGS: dict[str, str] = {"ohara": "ohara-recommended", "schott": "schott-preferred",
+                                   PLASTICS_VENDOR: "plastics"}
+
+
+def _start_vendor(value: object, medium: Material) -> str | None:
+    """The vendor of a start material: a catalog glass's, ``plastics`` for a Table S10 plastic named in
+    the spec, None for model, tabulated and AGF glasses."""
+    if isinstance(medium, CatalogGlass):
+        return medium.glass.vendor
+    if isinstance(value, str) and isinstance(medium, ModelGlass):
+        return PLASTICS_VENDOR
+    return None
+
+
+def binding_catalog(spec: LensSpec, media: Sequence[Material], glass_surfaces: Sequence[int]) -> tuple[str, str]:
+    """The design catalog the glass variables of ``spec`` bind to, and the notice that says so ("" if none).
+
+    ``[optimize] catalog``, when the spec sets it. Else a varied catalog glass stays in its own vendor's
+    catalog: the design catalog of the vendor of the start materials (:data:`VENDOR_CATALOGS`) when they
+    all come from one vendor that has one, else the default ``ohara-recommended``. The notice names the
+    surfaces and vendors whenever the catalog was not set, or is another vendor's than a start glass's.
+
+    Args:
+        media: (S+1) built materials (object space, then the medium after every surface).
+        glass_surfaces: the first surface of every varied glass element.
+    """
+    opt = spec.optimize
+    explicit = opt is not None and "catalog" in opt.model_fields_set
+    default = opt.catalog if opt is not None else so.OptimizeSpec().catalog
+    if not glass_surfaces:
+        return default, ""
+    starts = {s: _start_vendor(spec.surfaces[s].material, media[s + 1]) for s in glass_surfaces}
+    by_vendor: dict[str | None, list[int]] = {}
+    for s, v in starts.items():
+        by_vendor.setdefault(v, []).append(s)
+
+    def start(vendors: Sequence[str | None]) -> str:
+        parts = [f"{v or 'model'} glasses (surface{'s' * (len(by_vendor[v]) > 1)} "
+                 f"{', '.join(str(s) for s in by_vendor[v])})" for v in vendors]
+        return "the glass variables start as " + ", ".join(parts)
+
+    choose = "set [optimize] catalog to choose another"
+    if explicit:
+        own = next((v for v, c in VENDOR_CATALOGS.items() if c == default), None)
+        moved = [v for v in by_vendor if v is not None and v != own]
+        if not moved:
+            return default, ""
+        return default, f"{start(moved)}; they bind to {default}, as [optimize] catalog says"
+    vendors = [v for v in by_vendor if v is not None]
+    if len(vendors) == 1 and None not in by_vendor and vendors[0] in VENDOR_CATALOGS:
+        chosen = VENDOR_CATALOGS[vendors[0]]
+        return chosen, f"{start(vendors)}; they bind to {chosen}, their vendor's design catalog; {choose}"
+    missing = [v for v in vendors if v not in VENDOR_CATALOGS]
+    why = (f", as lensopt has no design catalog of {', '.join(missing)}" if missing else
+           ", as they are not all from one vendor" if vendors else "")
+    return default, f"{start(list(by_vendor))}; they bind to {default}, the default design catalog{why}; {choose}"
+
+
 def problem_setup(spec: LensSpec, *, dtype: torch.dtype = torch.float64,
                   device: torch.device | str | None = None) -> tuple[ProblemSetup, LensSpec]:
     """The plain ``ProblemSetup`` of ``spec`` (its ``[optimize]`` section or the defaults) and the
@@ -153,6 +216,13 @@ def problem_setup(spec: LensSpec, *, dtype: torch.dtype = torch.float64,
     prepared = with_varied_powers(spec)
     declared = declare_variables(prepared)
     model = build(prepared, dtype=dtype, device=device)
+    catalog, told = binding_catalog(prepared, model.media, [d.surface for d in declared if d.kind == "glass"])
+    if told:
+        notice(f"optimize.catalog: {told}")
+    if catalog != opt.catalog:
+        opt = dataclasses.replace(opt, catalog=catalog)
+        if prepared.optimize is not None:  # the written lens records the catalog its glasses bound to
+            prepared.optimize = prepared.optimize.model_copy(update={"catalog": catalog})
     surfaces = tuple(SurfaceInfo(glass_after=not s.is_air, plane=s.type == "plane",
                                  material_varies="material" in s.vary) for s in prepared.surfaces)
     camera = camera_of(model) if prepared.sensor is not None else None

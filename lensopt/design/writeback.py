@@ -9,15 +9,15 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from lensopt.design.setup import SpecProblem
+from lensopt.design.setup import VENDOR_CATALOGS, SpecProblem
 from lensopt.errors import LensoptError
-from lensopt.materials import find_glass
+from lensopt.materials import find_glass, notice
 from lensopt.materials.glass_space import nearest_glass
 from lensopt.spec.models import DiffractiveSurface, LensSpec, ModelGlassSpec
 
 __all__ = ["BoundGlass", "to_spec", "bind_glasses"]
 
-_VENDOR = {"ohara-recommended": "ohara", "schott-preferred": "schott", "plastics": "plastics"}
+_VENDOR = {c: v for v, c in VENDOR_CATALOGS.items()}
 
 
 @dataclass(frozen=True)
@@ -88,6 +88,11 @@ def to_spec(problem: SpecProblem, theta: Tensor, materials: dict[int, str | Mode
 def bind_glasses(problem: SpecProblem, theta: Tensor) -> tuple[LensSpec, list[BoundGlass]]:
     """Bind every glass variable to its nearest catalog glass (whitened distance) and freeze it.
 
+    The catalog is the problem's design catalog (``setup.binding_catalog``: the spec's ``[optimize]
+    catalog``, else the start glasses' vendor's). A bound glass is written as ``"vendor:NAME"`` when the
+    vendor data lensopt ships have it, else as a model glass with the catalog's nd, vd, ΔPgF; that
+    substitution is told as a notice.
+
     Returns the spec for the next phase (materials by name, ``material`` out of ``vary``) and what
     was bound.
     """
@@ -108,8 +113,9 @@ def bind_glasses(problem: SpecProblem, theta: Tensor) -> tuple[LensSpec, list[Bo
             try:
                 found = find_glass(f"{vendor}:{name}")
                 mat = f"{vendor}:{found.name}"
-            except LensoptError:
-                pass  # not in the vendor data lensopt ships: keep the catalog's nd, vd, ΔPgF
+            except LensoptError:  # not in the vendor data lensopt ships: keep the catalog's nd, vd, ΔPgF
+                notice(f"surfaces[{v.surface}].material: {name} of {cat.name} is not in lensopt's {vendor} "
+                       f"data; written as a model glass (nd={nd:.5f}, vd={vd:.2f}, dpgf={dpgf:.4f})")
         materials[v.surface] = mat
         dist = float(torch.linalg.vector_norm(gi - torch.as_tensor(space.points[i], dtype=gi.dtype)))
         bound.append(BoundGlass(v.surface, name, mat, dist))

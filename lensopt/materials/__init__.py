@@ -17,6 +17,8 @@ from lensopt.materials.catalog import (
     design_catalog,
     find_glass,
     list_glasses,
+    notice,
+    resolve_glass,
 )
 from lensopt.materials.dispersion import (
     CATALOG_FORMULAS,
@@ -57,4 +59,6 @@ __all__ = [
     "list_glasses",
     "material_from_name",
     "normal_pgf",
+    "notice",
+    "resolve_glass",
 ]

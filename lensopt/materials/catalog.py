@@ -11,8 +11,10 @@ import csv
 import difflib
 import functools
 import json
+import logging
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -30,6 +32,7 @@ __all__ = [
     "PLASTICS_VENDOR",
     "HARTMANN_RANGE_UM",
     "find_glass",
+    "resolve_glass",
     "list_glasses",
     "normalize_name",
     "catalog_info",
@@ -39,8 +42,23 @@ __all__ = [
 ]
 
 PLASTICS_VENDOR = "plastics"
-#: Lookup priority for bare names; qualified names (``"ohara:S-BSL7"``) pick the vendor directly.
-VENDORS: tuple[str, ...] = ("schott", "ohara", "hikari", "hoya", "cdgm", "sumita", PLASTICS_VENDOR)
+#: Lookup order of bare names; qualified names (``"ohara:S-BSL7"``) pick the vendor directly. Schott and
+#: Ohara first (the most used catalogs, formulas valid from the near UV to 2.3–2.5 µm), then Hoya, CDGM
+#: and Sumita (valid to 1.0–2.3 µm), then Hikari, whose shipped data are valid from 0.4 to 0.7 µm only
+#: for most glasses, then the Table S10 plastics. Of the vendors that have the name, the first whose
+#: valid range covers the spectrum is taken (:func:`resolve_glass`).
+VENDORS: tuple[str, ...] = ("schott", "ohara", "hoya", "cdgm", "sumita", "hikari", PLASTICS_VENDOR)
+
+log = logging.getLogger(__name__)
+_told: set[str] = set()
+
+
+def notice(message: str) -> None:
+    """Tell the user ``message`` once per process: a WARNING record on this module's logger (the CLI
+    prints it as one ``warning: ...`` line); the library itself never prints."""
+    if message not in _told:
+        _told.add(message)
+        log.warning("%s", message)
 
 #: Valid wavelength range (µm) of Hartmann-model materials (ModelGlass, the Table S10 plastics).
 #: For accepted inputs (10 <= vd <= 120, |dpgf| <= 0.1) the pole B of eq. S4 stays below
@@ -212,15 +230,48 @@ def _close_matches(key: str, vendors: tuple[str, ...], n: int = 5) -> list[Glass
     return found[:n]
 
 
-def find_glass(name: str) -> Glass:
-    """Look up a catalog glass by name.
-
-    Matching ignores case and whitespace (``"S-BSL 7"``, ``"s-bsl7"`` and ``"S-BSL7"`` are the
-    same). ``"vendor:NAME"`` picks a vendor (``"ohara:S-BSL7"``); a bare name resolves in the
-    priority order of :data:`VENDORS` (schott, ohara, hikari, hoya, cdgm, sumita, plastics).
+def find_glass(name: str, wavelengths_um: Sequence[float] | None = None, *, path: str | None = None) -> Glass:
+    """Look up a catalog glass by name (:func:`resolve_glass`); a vendor choice among several is told
+    once as a notice (:func:`notice`), prefixed with ``path`` when given.
 
     Raises:
-        MaterialError: unknown vendor or glass; the message lists close names.
+        MaterialError: unknown vendor or glass (the message lists close names), or a bare name none of
+            whose vendors' data cover ``wavelengths_um``.
+    """
+    glass, told = resolve_glass(name, wavelengths_um)
+    if told:
+        notice(f"{path}: {told}" if path else told)
+    return glass
+
+
+def _covers(glass: Glass, wavelengths_um: Sequence[float]) -> bool:
+    lo, hi = glass.range_um
+    return all(lo <= float(w) <= hi for w in wavelengths_um)
+
+
+def _span(wavelengths_um: Sequence[float]) -> str:
+    lo, hi = min(wavelengths_um), max(wavelengths_um)
+    return f"{lo * 1e3:g} nm" if lo == hi else f"{lo * 1e3:g}–{hi * 1e3:g} nm"
+
+
+def _range(glass: Glass) -> str:
+    return f"{glass.range_um[0]:g}–{glass.range_um[1]:g} µm"
+
+
+def resolve_glass(name: str, wavelengths_um: Sequence[float] | None = None) -> tuple[Glass, str]:
+    """The catalog glass a material name means, and the notice to give about the choice ("" if none).
+
+    Matching ignores case and whitespace (``"S-BSL 7"``, ``"s-bsl7"`` and ``"S-BSL7"`` are the
+    same). ``"vendor:NAME"`` picks a vendor (``"ohara:S-BSL7"``); its valid range is checked where the
+    material is used (``Material.check_wavelengths``). A bare name is looked up in every vendor of
+    :data:`VENDORS`, in that order (schott, ohara, hoya, cdgm, sumita, hikari, plastics); with
+    ``wavelengths_um`` (the spec's spectrum, µm) the first whose valid range covers them all is taken.
+    When more than one vendor has the name the notice says which was taken and why.
+
+    Raises:
+        MaterialError: unknown vendor or glass (the message lists close names); a bare name none of
+            whose vendors' valid ranges covers ``wavelengths_um`` (the message gives the ranges, the
+            spectrum and close names that cover it).
     """
     vendors = VENDORS
     bare = name
@@ -229,13 +280,33 @@ def find_glass(name: str) -> Glass:
         vendors = (_vendor_key(vendor),)
     key = normalize_name(bare)
     index = _index()
-    for v in vendors:
-        if key in index[v]:
-            return index[v][key]
-    where = "" if len(vendors) > 1 else f" in the {vendors[0]} catalog"
-    close = _close_matches(key, vendors)
-    hint = "; close matches: " + ", ".join(g.label for g in close) if close else "; no close matches"
-    raise MaterialError(f"unknown glass {bare.strip()!r}{where}{hint}", got=name)
+    found = [index[v][key] for v in vendors if key in index[v]]
+    if not found:
+        where = "" if len(vendors) > 1 else f" in the {vendors[0]} catalog"
+        close = _close_matches(key, vendors)
+        hint = "; close matches: " + ", ".join(g.label for g in close) if close else "; no close matches"
+        raise MaterialError(f"unknown glass {bare.strip()!r}{where}{hint}", got=name)
+    if len(vendors) == 1:
+        return found[0], ""
+    wl = [float(w) for w in wavelengths_um] if wavelengths_um else []
+    fits = [g for g in found if _covers(g, wl)]
+    if not fits:
+        ranges = ", ".join(f"{_range(g)} of {g.label}" for g in found)
+        others = [g for g in _close_matches(key, VENDORS, n=12) if _covers(g, wl) and g not in found][:3]
+        hint = ("; close names that cover it: " + ", ".join(g.label for g in others)) if others else ""
+        raise MaterialError(f"the spectrum {_span(wl)} is not inside the valid range {ranges}{hint}", got=name)
+    pick = fits[0]
+    if len(found) == 1:
+        return pick, ""
+    which = ", ".join(g.vendor for g in found)
+    if pick is found[0]:
+        why = "the first in the vendor order " + ", ".join(VENDORS)
+    else:
+        skipped = ", ".join(f"{g.label} is valid {_range(g)} only" for g in found[: found.index(pick)])
+        why = f"the first in the vendor order whose data cover the spectrum ({_span(wl)}); {skipped}"
+    told = (f"glass {bare.strip()!r} is in the {which} catalogs; using {pick.label}, {why}; "
+            f"write '{pick.vendor}:{pick.name}' to make the choice explicit")
+    return pick, told
 
 
 # ---------------------------------------------------------------------------------------------

@@ -285,17 +285,21 @@ def _spline_pieces(wl: tuple[float, ...], n: tuple[float, ...]) -> tuple[tuple[f
     return tuple(tuple(float(spline.c[3 - p, k]) for p in range(4)) for k in range(len(wl) - 1))
 
 
-def material_from_name(name: str) -> Material:
+def material_from_name(name: str, wavelengths_um: Sequence[float] | None = None, *,
+                       path: str | None = None) -> Material:
     """The material a spec names: ``"air"`` -> :class:`Air`, a Table S10 plastic -> :class:`ModelGlass`,
     anything else -> :class:`CatalogGlass` via :func:`~lensopt.materials.catalog.find_glass`
-    (case/space-insensitive, optional ``"vendor:"`` prefix).
+    (case/space-insensitive, optional ``"vendor:"`` prefix; a bare name takes the first vendor in
+    :data:`~lensopt.materials.catalog.VENDORS` whose valid range covers ``wavelengths_um``, and a choice
+    among several vendors is told once as a notice naming ``path``).
 
     Raises:
-        MaterialError: unknown glass (with close matches).
+        MaterialError: unknown glass (with close matches), or a bare name whose vendors' data do not
+            cover ``wavelengths_um``.
     """
     if name.strip().lower() == "air":
         return Air()
-    glass = find_glass(name)
+    glass = find_glass(name, wavelengths_um, path=path)
     if glass.vendor == PLASTICS_VENDOR:
         return ModelGlass(nd=glass.nd, vd=glass.vd, dpgf=0.0, name=glass.name)
     return CatalogGlass(glass)

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
@@ -50,8 +51,10 @@ class Model:
         return camera_of(self)
 
 
-def resolve_material(value: str | ModelGlassSpec | TabulatedGlassSpec | AgfGlassSpec, *, path: str) -> Material:
-    """Material object for a spec's ``material`` value; errors name ``path``."""
+def resolve_material(value: str | ModelGlassSpec | TabulatedGlassSpec | AgfGlassSpec, *, path: str,
+                     wavelengths_um: Sequence[float] | None = None) -> Material:
+    """Material object for a spec's ``material`` value; errors and notices name ``path``. A bare glass
+    name takes the first vendor whose data cover ``wavelengths_um`` (``materials.resolve_glass``)."""
     try:
         if isinstance(value, ModelGlassSpec):
             return ModelGlass(value.nd, value.vd, value.dpgf, name=value.name)
@@ -61,7 +64,7 @@ def resolve_material(value: str | ModelGlassSpec | TabulatedGlassSpec | AgfGlass
             from lensopt.materials.agf import agf_glass
 
             return agf_glass(value.catalog, value.glass)
-        return material_from_name(value)
+        return material_from_name(value, wavelengths_um, path=path)
     except LensoptError as err:
         raise err.at(path) from None
 
@@ -73,7 +76,7 @@ def build(spec: LensSpec, *, dtype: torch.dtype = torch.float64, device: torch.d
     media: list[Material] = [material_from_name("air")]
     for i, surf in enumerate(spec.surfaces):
         path = f"surfaces[{i}].material"
-        mat = resolve_material(surf.material, path=path)
+        mat = resolve_material(surf.material, path=path, wavelengths_um=wavelengths_um)
         mat.check_wavelengths(wavelengths_um, path=path)
         media.append(mat)
     wl = torch.tensor(wavelengths_um, **opts)

@@ -332,7 +332,9 @@ class OptimizeSpec(_Model):
         asphere_basis: ``monomial`` (a'_2i = α^2i a_2i) or ``bezier`` (Bernstein control points of
             the same polynomial, a linear re-parameterization, S2.1.3).
         catalog: design catalog of the glass variables: ohara-recommended | schott-preferred |
-            plastics | path/to/file.csv.
+            plastics | path/to/file.csv. When not set, varied catalog glasses stay in their own vendor's
+            catalog (schott → schott-preferred, ohara → ohara-recommended, plastics → plastics) if they
+            all start from one such vendor, else ohara-recommended; the choice is one notice.
         glass_parameters: 2 (nd, vd; ΔPgF = 0) or 3 (nd, vd, ΔPgF).
         bind_at: fraction of the steps after which glasses are bound to their nearest catalog
             entry, frozen, and the optimizer reset (S4.1.3); 1 = never.

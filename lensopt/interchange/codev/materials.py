@@ -99,7 +99,7 @@ def _extras_definition(name: str, extra_glasses: Any, wl: list[float], index: li
             value = TabulatedGlassSpec(**{k: v for k, v in raw.items() if k != "type"})
         else:
             return None
-        mat = resolve_material(value, path="material")
+        mat = resolve_material(value, path="material", wavelengths_um=[w * 1e-3 for w in wl])
         mat.check_wavelengths([w * 1e-3 for w in wl], path="material")
         got = mat.index(torch.tensor([w * 1e-3 for w in wl], dtype=torch.float64)).tolist()
     except (LensoptError, ValueError, TypeError):
