@@ -14,7 +14,8 @@ from matplotlib.figure import Figure
 
 from lensopt.files import atomic_path
 
-__all__ = ["contrast_on_white", "relative_luminance", "wavelength_color", "field_color", "nice_length", "add_scale_bar", "save_figure", "new_figure"]
+__all__ = ["contrast_on_white", "relative_luminance", "wavelength_color", "field_color", "nice_length", "add_scale_bar",
+           "save_figure", "new_figure"]
 
 #: Field colours of layouts (colour-blind-safe Okabe–Ito palette: blue, bluish green, vermillion, ...).
 FIELD_COLORS = ("#0072B2", "#009E73", "#D55E00", "#CC79A7", "#E69F00", "#56B4E9", "#000000", "#F0E442")

@@ -40,5 +40,6 @@ def test_error_line_is_one_write_of_the_whole_line(monkeypatch: pytest.MonkeyPat
     monkeypatch.setattr(sys, "stderr", rec)
     error_line("torchrun: processes were started with\ndifferent settings [1]")
     # (rich's capture ends with an empty write: no bytes reach the stream)
-    assert [w for w in rec.writes if w] == [f"{prefix}error: torchrun: processes were started with different settings [1]\n"]
+    line = f"{prefix}error: torchrun: processes were started with different settings [1]\n"
+    assert [w for w in rec.writes if w] == [line]
     assert rec.flushes >= 1
