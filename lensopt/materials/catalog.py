@@ -294,7 +294,10 @@ def resolve_glass(name: str, wavelengths_um: Sequence[float] | None = None) -> t
         ranges = ", ".join(f"{_range(g)} of {g.label}" for g in found)
         others = [g for g in _close_matches(key, VENDORS, n=12) if _covers(g, wl) and g not in found][:3]
         hint = ("; close names that cover it: " + ", ".join(g.label for g in others)) if others else ""
-        raise MaterialError(f"the spectrum {_span(wl)} is not inside the valid range {ranges}{hint}", got=name)
+        bad = [w for w in wl if not any(_covers(g, [w]) for g in found)]
+        what = (f"wavelength {bad[0]:g} µm of the spectrum ({_span(wl)}) is outside" if bad else
+                f"the spectrum {_span(wl)} is not inside")
+        raise MaterialError(f"{what} the valid range {ranges}{hint}", got=name)
     pick = fits[0]
     if len(found) == 1:
         return pick, ""

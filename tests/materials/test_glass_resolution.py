@@ -83,7 +83,8 @@ def test_no_vendor_covers_the_spectrum_is_an_error() -> None:
     with pytest.raises(MaterialError) as info:
         material_from_name("SK16", [0.38, 0.55, 0.65], path="surfaces[0].material")
     msg = str(info.value)
-    assert msg.startswith("the spectrum 380–650 nm is not inside the valid range 0.4–0.7 µm of SK16 (hikari)")
+    assert msg.startswith("wavelength 0.38 µm of the spectrum (380–650 nm) is outside the valid range 0.4–0.7 µm of "
+                          "SK16 (hikari)")
     assert "N-SK16 (schott)" in msg  # a close name whose data cover the spectrum
     with pytest.raises(MaterialError, match=r"0\.39–2\.5 µm of SF11 \(schott\), 0\.4–0\.7 µm of SF11 \(hikari\)"):
         find_glass("SF11", [0.38, 0.55])
@@ -119,8 +120,8 @@ def test_cli_range_error_names_the_field(tmp_path: Path) -> None:
     assert result.exit_code == 2, result.output
     lines = result.output.strip().splitlines()
     assert len(lines) == 1, result.output
-    assert lines[0].startswith("error: ") and "surfaces[0].material: the spectrum 380–650 nm is not inside " \
-        "the valid range 0.4–0.7 µm of SK16 (hikari)" in lines[0]
+    assert lines[0].startswith("error: ") and "surfaces[0].material: wavelength 0.38 µm of the spectrum " \
+        "(380–650 nm) is outside the valid range 0.4–0.7 µm of SK16 (hikari)" in lines[0]
 
 
 def test_cli_prints_the_notice_as_a_warning_line(tmp_path: Path) -> None:
