@@ -179,3 +179,17 @@ def mixed_rays(n: int = 400) -> Any:
     d = torch.stack([torch.zeros_like(ang), torch.sin(ang), torch.cos(ang)], -1)
     pos = torch.cat([xy, torch.full((n, 1), -2.0, dtype=torch.float64)], -1)
     return Rays(pos=pos, dir=d, wavelength=torch.randint(0, 3, (n,), generator=g))
+
+
+def microscope_table_s12(spec: Any) -> tuple[Any, list[Any], list[Any]]:
+    """A microscope lens spec against Table S12 on a dense sample (grid 31): (model, its glass surfaces,
+    the checks), shared by the tests that hold the shipped microscope lenses."""
+    from lensopt.analysis.requirements import check_requirements, table_s12
+    from lensopt.spec import build
+
+    model = build(spec)
+    glass = [s for s in spec.surfaces if not s.is_air]
+    names = [s.material if isinstance(s.material, str) else s.material.name for s in glass]
+    checks = check_requirements(model.lens, model.system, table_s12(), glass_gaps=[not s.is_air for s in spec.surfaces],
+                                materials=names, grid=31)
+    return model, glass, checks

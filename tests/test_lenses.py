@@ -38,11 +38,12 @@ import pytest
 import torch
 
 from lensopt.analysis.report import trace_report
-from lensopt.analysis.requirements import check_requirements, failed, table_s8, table_s12
+from lensopt.analysis.requirements import check_requirements, failed, table_s8
 from lensopt.materials import design_catalog
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec import build, dump_json, load_spec
+from tests.helpers import microscope_table_s12
 
 ROOT = Path(__file__).resolve().parents[1]
 LENSES = sorted(p for p in (ROOT / "lenses").glob("*.json") if p.name != "check_baseline.json")  # not a lens
@@ -169,11 +170,7 @@ def test_the_microscope_study_lens_meets_table_s12() -> None:
     # air ≥ 0.5 mm, normals ≤ 30°, angles ≤ 60°, |distortion| ≤ 2 %, recommended Ohara glasses, EFL
     # 10 mm at f/1.25 (EPD 8 mm), WD (last gap) 12 mm, 8 spherical elements.
     spec = load_spec(ROOT / "lenses" / "microscope_8p_wd12.json")
-    model = build(spec)
-    glass = [s for s in spec.surfaces if not s.is_air]
-    names = [s.material if isinstance(s.material, str) else s.material.name for s in glass]
-    checks = check_requirements(model.lens, model.system, table_s12(), glass_gaps=[not s.is_air for s in spec.surfaces],
-                                materials=names, grid=31)
+    model, glass, checks = microscope_table_s12(spec)
     assert failed(checks) == [], [c for c in checks if not c.ok]
     assert len(glass) == 8 and all(s.type == "sphere" for s in spec.surfaces if s.type != "plane")
     assert spec.surfaces[-1].thickness == 12.0 and spec.surfaces[0].stop
