@@ -1,8 +1,8 @@
 """Report on the seed's case studies (S4 telephoto, S4.2.2 hybrid, S5 microscope): for each spec and the
 lens a short ``lensopt optimize`` run wrote from it, the ESR on a dense pupil (rings:24, as
 ``lensopt trace``), the study table's requirements checked on a dense ray sample and on the seed's
-definition (the optimizer's rays at 11 fields; ``lensopt.analysis.requirements``), the glasses, and for a diffractive surface its phase range over the
-used aperture. Writes benchmarks/studies/results_studies.json.
+definition (the optimizer's rays at 11 fields; ``lensopt.analysis.requirements``), the glasses, and
+for a diffractive surface its phase range over the used aperture. Writes benchmarks/studies/results_studies.json.
 
     PYTHONPATH=. python benchmarks/studies/studies_report.py lenses/telephoto_5p_tr080.json \
         lenses/telephoto_5p1_middle_tr075.json lenses/microscope_8p_wd12.json
