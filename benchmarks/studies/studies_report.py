@@ -1,8 +1,8 @@
 """Report on the seed's case studies (S4 telephoto, S4.2.2 hybrid, S5 microscope): for each spec and the
 lens a short ``lensopt optimize`` run wrote from it, the ESR on a dense pupil (rings:24, as
-``lensopt trace``), the study table's requirements checked on a dense ray sample
-(``lensopt.analysis.requirements``), the glasses, and for a diffractive surface its phase range over the
-used aperture. Writes benchmarks/studies/results_studies.json.
+``lensopt trace``), the study table's requirements checked on a dense ray sample and on the seed's
+definition (the optimizer's rays at 11 fields; ``lensopt.analysis.requirements``), the glasses, and
+for a diffractive surface its phase range over the used aperture. Writes benchmarks/studies/results_studies.json.
 
     PYTHONPATH=. python benchmarks/studies/studies_report.py lenses/telephoto_5p_tr080.json \
         lenses/telephoto_5p1_middle_tr075.json lenses/microscope_8p_wd12.json
@@ -25,6 +25,7 @@ import torch
 
 from lensopt.analysis.report import trace_report
 from lensopt.analysis.requirements import check_requirements, failed, table_s8, table_s12
+from lensopt.analysis.spot import SEED_FIELDS
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import PupilSampling
 from lensopt.spec import build, load_spec
@@ -55,14 +56,25 @@ def lens_checks(stem: str, spec) -> dict:  # noqa: ANN001
     rep = trace_report(model, PupilSampling.parse("rings:24"))
     req = table_for(stem, spec)
     lens_glass = [s for s in spec.surfaces if not s.is_air and not (s.label or "").startswith("IR")]
-    checks = check_requirements(model.lens, model.system, req, glass_gaps=[not s.is_air for s in spec.surfaces],
-                                materials=[_material_name(s.material) for s in lens_glass])
+    kw = {"glass_gaps": [not s.is_air for s in spec.surfaces],
+          "materials": [_material_name(s.material) for s in lens_glass]}
+    checks = check_requirements(model.lens, model.system, req, **kw)
+    # The seed's definition (S2.2.2): the optimizer's rays, i.e. the spec's optimization pupil sampling (the
+    # one after binding when the spec polishes on another), at the seed code base's 11 equally spaced fields.
+    sampling = spec.optimize.sampling_after_binding or spec.optimize.sampling
+    fields = [i / (SEED_FIELDS - 1) for i in range(SEED_FIELDS)]
+    seed = check_requirements(model.lens, model.system, req, sample="seed", sampling=PupilSampling.parse(sampling),
+                              rel_field=fields, **kw)
     out = {
         "esr_um_rings24": rep["effective_spot_radius_um"],
         "first_order": rep["first_order"],
         "glasses": [_material_name(s.material) for s in lens_glass],
         "requirements": [{"name": c.name, "value": c.value, "limit": c.limit, "ok": c.ok} for c in checks],
         "requirements_failed": failed(checks),
+        "requirements_seed_definition": {"sampling": sampling, "fields": fields,
+                                         "checks": [{"name": c.name, "value": c.value, "limit": c.limit, "ok": c.ok}
+                                                    for c in seed],
+                                         "failed": failed(seed)},
     }
     phases = []
     for s, shape in enumerate(model.lens.shapes):

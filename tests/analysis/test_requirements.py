@@ -79,3 +79,43 @@ def test_the_checker_passes_the_shipped_cmount_lens_on_its_table() -> None:
                                 materials=[s.material for s in spec.surfaces if not s.is_air], fields=6, grid=31)
     assert failed(checks) == []
     assert {c.name for c in checks} >= {"no failed rays", "|distortion|", "catalog glasses", "EFL"}
+
+
+def _plate_on_axis_only():  # noqa: ANN202
+    """``_plate`` with one design field, the axis (the dense sample still runs fields 0 … 30°)."""
+    model, spec = _plate()
+    import dataclasses
+
+    return dataclasses.replace(model.system, rel_field=(0.0,), field_weights=()), model
+
+
+def test_the_seed_sample_probes_the_optimizers_rays_and_the_dense_sample_every_field() -> None:
+    # By hand, on axis (the seed's sample: the design fields, here only the axis, and the optimizer's
+    # rings, whose outer ring lies on the pupil rim): rays cross the plane stop face at normal incidence
+    # and meet the back sphere (R = −50 mm) at height 4ρ; the worst ray, ρ = 1, meets it at 4 mm:
+    # surface normal asin(4/50), incidence in the glass asin(4/50), refraction asin(n·4/50) (the worst
+    # angle), glass path 2 − (50 − √(2500 − 16)) mm. The dense sample adds the 30° field,
+    # whose incidence on the plane face alone is 30°.
+    from lensopt.optics.sampling import PupilSampling
+
+    system, model = _plate_on_axis_only()
+    n = float(material_from_name("N-BK7").index(torch.tensor([0.5875618], dtype=torch.float64)))
+    req = Requirements(glass_min=1.9, max_angle_deg=60.0, max_normal_deg=30.0)
+    seed = {c.name: c for c in check_requirements(model.lens, system, req, glass_gaps=[True, False], sample="seed",
+                                                  sampling=PupilSampling.parse("rings:6"))}
+    dense = {c.name: c for c in check_requirements(model.lens, system, req, glass_gaps=[True, False], fields=5,
+                                                   grid=21, rim=32)}
+    assert seed["surface normals"].value == pytest.approx(math.degrees(math.asin(4 / 50)), abs=1e-9)
+    assert seed["angles of incidence/refraction"].value == pytest.approx(math.degrees(math.asin(n * 4 / 50)),
+                                                                         abs=1e-9)
+    assert seed["glass 0 thickness ≥ 1.9 mm"].value == pytest.approx(2 - (50 - math.sqrt(2500 - 16)), abs=1e-9)
+    assert dense["angles of incidence/refraction"].value >= 30.0 - 1e-9
+    assert dense["surface normals"].value > seed["surface normals"].value  # off-axis rays reach higher
+
+
+def test_the_seed_sample_needs_the_optimization_sampling() -> None:
+    system, model = _plate_on_axis_only()
+    with pytest.raises(ValueError, match="sampling"):
+        check_requirements(model.lens, system, Requirements(), glass_gaps=[True, False], sample="seed")
+    with pytest.raises(ValueError, match="dense"):
+        check_requirements(model.lens, system, Requirements(), glass_gaps=[True, False], sample="sparse")
