@@ -18,7 +18,10 @@ were made for, so that a change to the tracer or the optimizer that would break 
   ``specs/telephoto_5p1_middle_tr075.toml`` (120 steps, then 566, 600, 1500 and 1200 more at full constraint
   weight, the last three with tighter margins): every Table S8 requirement met on a dense ray
   sample, Table S10 plastics; their ESRs (3.09 and 9.42 µm) are above the seed's (≈ 1.75 and ≈ 2.6 µm):
-  short runs, not the seed's optima (benchmarks/README.md, studies).
+  short runs, not the seed's optima (benchmarks/README.md, studies). The hybrid was made from the spec as it
+  was before commit 1466952 (``git show 1466952^:specs/telephoto_5p1_middle_tr075.toml``: the phase on E4's
+  front face); the spec now puts it on its own plane between E4 and E5 as the seed's published design, and
+  the lens has not been re-made from it (moving its phase there and 300 LM steps at full weight gave 39 µm).
 - ``microscope_8p_wd12.json``: the seed's microscope objective study (S5) after a 2400-step run (1200 with
   free glasses, 1200 bound) from the crude start of ``specs/microscope_8p_wd12_alt.toml`` (alternating
   positive and negative elements; the first start, ``specs/microscope_8p_wd12.toml``, reached 6.63 µm),
