@@ -51,7 +51,8 @@ def test_sweep_json_resume_and_mismatch(tmp_path: Path) -> None:
     lines = shown.stdout.split(" task(s) run, ")[0].splitlines()[:-1]  # the table, not the list of files
     assert max(map(len, lines)) <= 80 and "seed's" in lines[2]
     for p in doc["points"]:
-        row = next(ln.split() for ln in lines if ln.split()[:2] == [str(p["point"]), f"{p['optimize.solves[0].value']:g}"])
+        first = [str(p["point"]), f"{p['optimize.solves[0].value']:g}"]
+        row = next(ln.split() for ln in lines if ln.split()[:2] == first)
         assert row[2:4] == [f"{p['best_esr_um']:.4g}", f"{p['best_seed_esr_um']:.4g}"]
     bad = runner.invoke(app, _args(spec, out, "--perturb", "0.1"))
     assert bad.exit_code == 2
