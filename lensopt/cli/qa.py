@@ -57,7 +57,8 @@ def check(
                 console.print(f"[green]ok[/] {r.key}: {len(r.metrics)} metrics within tolerance")
                 console.print(_esr_note(r), highlight=False)
                 continue
-            t = Table(title=f"{r.key} ({r.name}): {n_bad} of {len(r.metrics)} metrics moved", title_justify="left")
+            t = Table(title=f"{r.key} ({r.name}): {n_bad} of {len(r.metrics)} metrics moved",
+                      title_justify="left")
             for col in ("metric", "baseline", "now", "Δ", "tolerance"):
                 t.add_column(col, justify="left" if col == "metric" else "right")
             for m in r.metrics:
