@@ -1,8 +1,9 @@
 """Report on the seed's case studies (S4 telephoto, S4.2.2 hybrid, S5 microscope): for each spec and the
 lens a short ``lensopt optimize`` run wrote from it, the ESR on a dense pupil (rings:24, as
-``lensopt trace``), the study table's requirements checked on a dense ray sample and on the seed's
-definition (the optimizer's rays at 11 fields; ``lensopt.analysis.requirements``), the glasses, and
-for a diffractive surface its phase range over the used aperture. Writes benchmarks/studies/results_studies.json.
+``lensopt trace``) and on the seed's measure (``seed_esr_um``: 11 fields, grid:61), the study table's
+requirements checked on a dense ray sample and on the seed's definition (the optimizer's rays at 11
+fields; ``lensopt.analysis.requirements``), the glasses, and for a diffractive surface its phase range
+over the used aperture. Writes benchmarks/studies/results_studies.json.
 
     PYTHONPATH=. python benchmarks/studies/studies_report.py lenses/telephoto_5p_tr080.json \
         lenses/telephoto_5p1_middle_tr075.json lenses/microscope_8p_wd12.json
@@ -23,7 +24,7 @@ from pathlib import Path
 
 import torch
 
-from lensopt.analysis.report import trace_report
+from lensopt.analysis.report import seed_esr_um, trace_report
 from lensopt.analysis.requirements import check_requirements, failed, table_s8, table_s12
 from lensopt.analysis.spot import SEED_FIELDS
 from lensopt.optics.bundle import trace_bundle
@@ -67,6 +68,7 @@ def lens_checks(stem: str, spec) -> dict:  # noqa: ANN001
                               rel_field=fields, **kw)
     out = {
         "esr_um_rings24": rep["effective_spot_radius_um"],
+        "seed_esr_um": seed_esr_um(model),
         "first_order": rep["first_order"],
         "glasses": [_material_name(s.material) for s in lens_glass],
         "requirements": [{"name": c.name, "value": c.value, "limit": c.limit, "ok": c.ok} for c in checks],
@@ -106,12 +108,17 @@ def main(paths: list[str]) -> None:
         end = lens_checks(stem, load_spec(p))
         results[key] = {"spec": str(spec_path.relative_to(ROOT)), "lens": p,
                          "published_esr_um": PUBLISHED_UM.get(stem), "start": start, "end": end}
-        print(f"{key}: ESR {start['esr_um_rings24']:.3f} → {end['esr_um_rings24']:.3f} µm "
-              f"(published ≈ {PUBLISHED_UM.get(stem)}); failed: {end['requirements_failed']}")
+        print(f"{key}: ESR {start['esr_um_rings24']:.3f} → {end['esr_um_rings24']:.3f} µm, seed's measure "
+              f"{_um(start['seed_esr_um'])} → {_um(end['seed_esr_um'])} µm (published ≈ {PUBLISHED_UM.get(stem)}); "
+              f"failed: {end['requirements_failed']}")
     out = ROOT / "benchmarks" / "studies" / "results_studies.json"
     old = json.loads(out.read_text()) if out.exists() else {}
     old.update(results)
     out.write_text(json.dumps(old, indent=1, ensure_ascii=False) + "\n")
+
+
+def _um(v: float | None) -> str:
+    return "—" if v is None else f"{v:.3f}"
 
 
 def _solved_start(spec_path: Path):  # noqa: ANN202

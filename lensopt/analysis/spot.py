@@ -16,7 +16,8 @@ from lensopt.engine import Engine
 from lensopt.optics.bundle import Bundle
 from lensopt.optics.lens import Lens, System
 
-__all__ = ["SpotStats", "spot_stats", "safe_sqrt", "seed_esr", "SEED_FIELDS", "SEED_SAMPLING"]
+__all__ = ["SpotStats", "spot_stats", "safe_sqrt", "seed_esr", "seed_spot_stats", "SEED_FIELDS", "SEED_SAMPLING",
+           "SEED_MEASURE"]
 
 
 def safe_sqrt(x: Tensor) -> Tensor:
@@ -90,15 +91,25 @@ SEED_SAMPLING = "grid:61"
 """Pupil sampling of the seed's ESR: a 61 × 61 cell-centred grid over the full pupil (dense)."""
 
 
-def seed_esr(lens: Lens, system: System, *, engine: Engine | None = None) -> Tensor:
-    """() Effective spot radius (mm) on the seed's measure (S4.2.1, S7): ``SEED_FIELDS`` equally spaced
-    relative fields 0 … 1 with equal weights, the system's wavelength weights, a dense full-pupil grid
-    (``SEED_SAMPLING``) and the system's aiming and front aperture, whatever fields and sampling the
-    spec optimizes with. Comparable between lenses of one study and with the seed's published ESRs."""
+SEED_MEASURE = f"{SEED_FIELDS} fields, {SEED_SAMPLING}"
+"""The seed's measure in words, as the reports label it."""
+
+
+def seed_spot_stats(lens: Lens, system: System, *, engine: Engine | None = None) -> SpotStats:
+    """Spot statistics on the seed's measure (S4.2.1, S7): ``SEED_FIELDS`` equally spaced relative fields
+    0 … 1 with equal weights, the system's wavelength weights, a dense full-pupil grid (``SEED_SAMPLING``)
+    and the system's aiming and front aperture, whatever fields and sampling the spec optimizes with.
+    Its ``effective_radius`` is ``seed_esr``."""
     from lensopt.optics.bundle import trace_bundle
     from lensopt.optics.sampling import PupilSampling
 
     rel = torch.linspace(0.0, 1.0, SEED_FIELDS, dtype=lens.dtype, device=lens.device)
     pupil = PupilSampling.parse(SEED_SAMPLING).points(dtype=lens.dtype, device=lens.device, engine=engine)
     bundle = trace_bundle(lens, system, pupil, rel_field=rel, engine=engine)
-    return spot_stats(bundle, system.wavelength_weights).effective_radius
+    return spot_stats(bundle, system.wavelength_weights)
+
+
+def seed_esr(lens: Lens, system: System, *, engine: Engine | None = None) -> Tensor:
+    """() Effective spot radius (mm) on the seed's measure (``seed_spot_stats``). Comparable between
+    lenses of one study and with the seed's published ESRs."""
+    return seed_spot_stats(lens, system, engine=engine).effective_radius

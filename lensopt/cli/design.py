@@ -87,20 +87,22 @@ class DesignProgress:
     def _line(r: dict[str, Any]) -> str:
         if r.get("status") != "finished":
             return f"start {r['name']} (round {r.get('round')}): failed — {r.get('reason', '')}"
-        return (f"start {r['name']} (round {r.get('round')}): ESR {_num(r.get('esr_um'))} µm, merit "
+        return (f"start {r['name']} (round {r.get('round')}): ESR {_num(r.get('esr_um'))} µm (seed's measure "
+                f"{_num(r.get('seed_esr_um'))} µm), merit "
                 f"{_num(r.get('merit'), '{:.6e}')}, {r.get('steps')} steps, {_num(r.get('cpu_s'), '{:.0f}')} s CPU")
 
     def _render(self) -> Group:
         t = Table(title=f"lensopt design — {len(self.records)} start(s), {time.monotonic() - self.t0:.0f} s",
                   header_style="bold")
-        for col in ("start", "round", "status", "ESR µm", "merit", "steps", "CPU s"):
+        for col in ("start", "round", "status", "ESR µm", "seed's\nESR µm", "merit", "steps", "CPU s"):
             t.add_column(col, justify="right")
         ranked = sorted(self.records, key=lambda r: (r.get("status") != "finished",
                                                       r.get("merit") if r.get("merit") is not None else math.inf))
         for r in ranked[:self.rows]:
             ok = r.get("status") == "finished"
             t.add_row(r["name"], str(r.get("round")), "ok" if ok else "[red]failed[/]", _num(r.get("esr_um")),
-                      _num(r.get("merit"), "{:.6e}"), str(r.get("steps", "—")), _num(r.get("cpu_s"), "{:.0f}"))
+                      _num(r.get("seed_esr_um")), _num(r.get("merit"), "{:.6e}"), str(r.get("steps", "—")),
+                      _num(r.get("cpu_s"), "{:.0f}"))
         parts: list[Any] = [t]
         if len(ranked) > self.rows:
             parts.append(Text(f"… {len(ranked) - self.rows} more (worse) start(s)"))
@@ -114,17 +116,19 @@ class DesignProgress:
 def render_result(console: Console, result: ProcedureResult, outdir: Path) -> None:
     """The distinct minima found and why the run stopped."""
     t = Table(title="distinct local minima (by final merit)", header_style="bold")
-    for col in ("rank", "merit", "ESR µm", "starts", "best start"):
+    for col in ("rank", "merit", "ESR µm", "seed's\nESR µm", "starts", "best start"):
         t.add_column(col, justify="right")
     for m in result.minima[:10]:
-        t.add_row(str(m["rank"]), f"{m['merit']:.6e}", _num(m["esr_um"]), str(m["count"]), m["best"])
+        t.add_row(str(m["rank"]), f"{m['merit']:.6e}", _num(m["esr_um"]), _num(m.get("seed_esr_um")), str(m["count"]),
+                  m["best"])
     console.print(t)
     extra = f"; {len(result.minima) - 10} more" if len(result.minima) > 10 else ""
     console.print(f"{result.rounds} round(s), {len(result.records)} start(s), {result.cpu_s / 3600:.2f} CPU-h, "
                   f"{result.elapsed_s:.0f} s; {result.stop_reason}{extra}", highlight=False)
     if result.best is not None:
-        console.print(f"best: start {result.best['name']}, ESR {_num(result.best.get('esr_um'))} µm; wrote "
-                      f"{outdir}/best.json and design.json", highlight=False)
+        console.print(f"best: start {result.best['name']}, ESR {_num(result.best.get('esr_um'))} µm (seed's "
+                      f"measure {_num(result.best.get('seed_esr_um'))} µm); wrote {outdir}/best.json and design.json",
+                      highlight=False)
 
 
 @commands.command("design", short_help="The seed's design procedure: rounds of perturbed starts (multi-start or "

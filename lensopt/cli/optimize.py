@@ -113,18 +113,23 @@ def plain_line(p: Progress) -> str:
 
 
 def summary(result: OptimizeResult, start: dict[str, Any], final: dict[str, Any],
-            constraints: dict[str, Any], output: str) -> dict[str, Any]:
-    """The machine-readable summary (``--json``): start and final trace reports of the written lens."""
+            constraints: dict[str, Any], output: str,
+            seed_esr_um: tuple[float | None, float | None] = (None, None)) -> dict[str, Any]:
+    """The machine-readable summary (``--json``): start and final trace reports of the written lens, and
+    both lenses' ESR on the seed's measure (``seed_esr_um``: start, final; ``analysis.report.seed_esr_um``)."""
+    from lensopt.analysis.spot import SEED_FIELDS, SEED_SAMPLING
+
     return {
         "output": output,
         "steps": result.steps,
         "stop_reason": result.stop_reason,
         "interrupted": result.interrupted,
         "elapsed_s": result.elapsed_s,
-        "start": {"effective_spot_radius_um": start["effective_spot_radius_um"],
+        "start": {"effective_spot_radius_um": start["effective_spot_radius_um"], "seed_esr_um": seed_esr_um[0],
                   "first_order": start["first_order"]},
-        "final": {"effective_spot_radius_um": final["effective_spot_radius_um"],
+        "final": {"effective_spot_radius_um": final["effective_spot_radius_um"], "seed_esr_um": seed_esr_um[1],
                   "first_order": final["first_order"], "fields": final["fields"], "sampling": final["sampling"]},
+        "seed_measure": {"fields": SEED_FIELDS, "sampling": SEED_SAMPLING},
         "bound_glasses": [{"surface": b.surface, "name": b.name,
                            "material": b.material if isinstance(b.material, str) else b.material.model_dump(),
                            "distance": b.distance} for b in result.bound],
@@ -147,8 +152,11 @@ def render_summary(console: Console, s: dict[str, Any]) -> None:
     console.print(f"[bold]{head}[/] after {s['steps']} steps, {s['elapsed_s']:.1f} s; written to {s['output']}")
     console.print(f"effective spot radius ({fin['sampling']}): {_um(st['effective_spot_radius_um'])} → "
                   f"[bold]{_um(fin['effective_spot_radius_um'])}[/]")
+    m = s["seed_measure"]
+    console.print(f"ESR, seed's measure ({m['fields']} fields, {m['sampling']}): {_um(st['seed_esr_um'])} → "
+                  f"[bold]{_um(fin['seed_esr_um'])}[/]")
     psnr = s.get("held_out_psnr_db", {})
-    if psnr and psnr["start"] == psnr["start"]:
+    if psnr and psnr["start"] is not None and psnr["start"] == psnr["start"]:  # NaN (None in --json): no image
         console.print(f"held-out raw PSNR: {psnr['start']:.3f} dB → [bold]{psnr['final']:.3f} dB[/]")
     fo = fin["first_order"]
     console.print(f"EFL {fo['efl']:.6f} mm, f/{fo['fnumber']:.4f}, total track {fo['total_track']:.4f} mm, "
@@ -257,9 +265,9 @@ def optimize(
 
 
 def _summary_of(start_spec: Any, result: OptimizeResult, seed: int, output: str, engine: Engine) -> dict[str, Any]:
-    """``summary`` of a finished run: both lenses traced as ``lensopt trace`` does (its default sampling),
-    the final lens's constraint margins."""
-    from lensopt.analysis.report import trace_report
+    """``summary`` of a finished run: both lenses traced as ``lensopt trace`` does (its default sampling)
+    and on the seed's measure, the final lens's constraint margins."""
+    from lensopt.analysis.report import seed_esr_um, trace_report
     from lensopt.design import build_problem
     from lensopt.optics.sampling import DEFAULT_REPORT_SAMPLING, PupilSampling
     from lensopt.optim.report import constraint_report
@@ -267,6 +275,7 @@ def _summary_of(start_spec: Any, result: OptimizeResult, seed: int, output: str,
 
     sampling = PupilSampling.parse(DEFAULT_REPORT_SAMPLING, seed=seed, weighted=True)
     final_problem = build_problem(result.spec, seed=seed, engine=engine)
-    return summary(result, trace_report(build(start_spec), sampling, engine=engine),
-                   trace_report(build(result.spec), sampling, engine=engine),
-                   constraint_report(final_problem, final_problem.theta0, sampling), output)
+    start, final = build(start_spec), build(result.spec)
+    return summary(result, trace_report(start, sampling, engine=engine), trace_report(final, sampling, engine=engine),
+                   constraint_report(final_problem, final_problem.theta0, sampling), output,
+                   (seed_esr_um(start, engine=engine), seed_esr_um(final, engine=engine)))

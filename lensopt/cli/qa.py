@@ -55,6 +55,7 @@ def check(
             n_bad = sum(not m.passed for m in r.metrics)
             if n_bad == 0:
                 console.print(f"[green]ok[/] {r.key}: {len(r.metrics)} metrics within tolerance")
+                console.print(_esr_note(r), highlight=False)
                 continue
             t = Table(title=f"{r.key} ({r.name}): {n_bad} of {len(r.metrics)} metrics moved",
                       title_justify="left")
@@ -66,12 +67,26 @@ def check(
                 t.add_row(m.metric, _fmt(m.baseline), _fmt(m.value),
                           "" if m.delta is None else f"{m.delta:+.3g}", f"{m.tolerance:.3g}")
             console.print(t)
+            console.print(_esr_note(r), highlight=False)
     if not all(r.passed for r in results):
         raise typer.Exit(1)
 
 
 def _fmt(v: float | None) -> str:
     return "—" if v is None else f"{v:.9g}"
+
+
+def _esr_note(r: Any) -> str:
+    """``   ESR 13.711 µm; seed's measure (11 fields, grid:61) 13.438 µm``: the lens's values now ("—" where
+    not measured), under its line."""
+    from lensopt.analysis.spot import SEED_MEASURE
+
+    now = {m.metric: m.value for m in r.metrics}
+
+    def um(v: float | None) -> str:
+        return "—" if v is None or v != v else f"{v:.3f} µm"
+
+    return f"   ESR {um(now.get('esr_um'))}; seed's measure ({SEED_MEASURE}) {um(now.get('seed_esr_um'))}"
 
 
 @commands.command("accuracy")

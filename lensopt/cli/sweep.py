@@ -46,6 +46,10 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
+def _esr(v: float | None) -> str:
+    return "—" if v is None else f"{v:.4g}"
+
+
 class SweepProgress:
     """Per grid point: starts done / failed / pending and the best ESR so far. A rich Live table on a
     terminal; otherwise a plain line at most every ``interval_s`` (and when the last task finishes)."""
@@ -132,10 +136,12 @@ def render_table(console: Console, result: SweepResult, outdir: Path) -> None:
     """The final table: one row per point; then the files that are on disk (named, after they are written)."""
     keys = result.keys
     heads = [k.replace(".", ".\n") if len(k) > 12 else k for k in keys]  # long dotted keys wrap at the dots
-    cols = ["point", *heads, "ESR µm", "merit", "best\nstart", "steps", "stop", "starts\nok/failed", "wall s"]
+    # ESRs to 4 digits (the JSON and CSV keep every digit), so that the seed's measure fits in 80 columns.
+    cols = ["point", *heads, "ESR µm", "seed's\nESR µm", "merit", "best\nstart", "steps", "stop", "starts\nok/fail",
+            "wall s"]
     t = compact_table("best of starts per point", [(c, "left" if c == "stop" else "right") for c in cols])
     for r in result.rows:
-        t.add_row(str(r["point"]), *[_fmt(r[k]) for k in keys], _fmt(r["best_esr_um"]),
+        t.add_row(str(r["point"]), *[_fmt(r[k]) for k in keys], _esr(r["best_esr_um"]), _esr(r["best_seed_esr_um"]),
                   "—" if r["best_merit"] is None else f"{r['best_merit']:.4e}", _fmt(r["best_start"]),
                   _fmt(r["best_steps"]), _fmt(r["best_stop_reason"]),
                   f"{r['starts_finished']}/{r['starts_failed']}", f"{r['wall_s']:.1f}")

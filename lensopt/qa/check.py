@@ -1,10 +1,11 @@
 """Regression checks of lenses against a recorded baseline (``lensopt check``).
 
 Each lens is measured with fixed, recorded settings (``CheckSettings``: pupil sampling, seed, eager
-float64 trace) — first-order data (EFL, BFL, f/#, TTL), ESR, RMS spot radius, distortion, relative
-illumination and failed rays per field, and the margins of the constraints its ``[optimize]`` section
-declares — and compared with a baseline JSON, each metric against an absolute tolerance (defaults
-``spec.models.CHECK_METRICS``, overridable per lens in ``[check] tolerances``).
+float64 trace) — first-order data (EFL, BFL, f/#, TTL), ESR, the ESR on the seed's measure
+(``analysis.report.seed_esr_um``: 11 fields, grid:61, whatever the settings' sampling), RMS spot radius,
+distortion, relative illumination and failed rays per field, and the margins of the constraints its
+``[optimize]`` section declares — and compared with a baseline JSON, each metric against an absolute
+tolerance (defaults ``spec.models.CHECK_METRICS``, overridable per lens in ``[check] tolerances``).
 
 Baseline file (``lenses/check_baseline.json``)::
 
@@ -87,15 +88,16 @@ def identity(spec: LensSpec) -> dict[str, Any]:
 def measure(spec: LensSpec, settings: CheckSettings, *, engine: Engine | None = None) -> dict[str, float]:
     """Every metric of one lens, with ``settings`` (floats; counts as floats too), traced on the baseline's
     backend (``settings.backend``) within ``engine``'s memory budget."""
-    from lensopt.analysis.report import trace_report
+    from lensopt.analysis.report import seed_esr_um, trace_report
 
     engine = on_backend(engine, settings.backend)
     sampling = PupilSampling.parse(settings.sampling, seed=settings.seed, path="settings.sampling", weighted=True)
-    rep = trace_report(build(spec), sampling, engine=engine)
+    model = build(spec)
+    rep = trace_report(model, sampling, engine=engine)
     out: dict[str, float] = {}
     fo = rep["first_order"]
     out.update(efl_mm=fo["efl"], bfl_mm=fo["bfl"], fnumber=fo["fnumber"], ttl_mm=fo["total_track"],
-               esr_um=rep["effective_spot_radius_um"])
+               esr_um=rep["effective_spot_radius_um"], seed_esr_um=_num(seed_esr_um(model, engine=engine)))
     for f in rep["fields"]:
         at = f"@{f['relative']:.2f}"
         out["rms_um" + at] = f["rms_spot_radius_weighted_um"]

@@ -480,8 +480,8 @@ class ImagePlaneSpec(_Model):
 
 
 CHECK_METRICS = {
-    "efl_mm": 1e-5, "bfl_mm": 1e-5, "fnumber": 1e-6, "ttl_mm": 1e-5, "esr_um": 1e-3, "rms_um": 1e-3,
-    "distortion_percent": 1e-4, "ri": 1e-5, "failed_rays": 0.0, "margin": 1e-3,
+    "efl_mm": 1e-5, "bfl_mm": 1e-5, "fnumber": 1e-6, "ttl_mm": 1e-5, "esr_um": 1e-3, "seed_esr_um": 1e-3,
+    "rms_um": 1e-3, "distortion_percent": 1e-4, "ri": 1e-5, "failed_rays": 0.0, "margin": 1e-3,
 }
 """Metric families of ``lensopt check`` and their default absolute tolerances (in the metric's unit:
 mm, µm, %, a fraction, a ray count; margins in their constraint's unit). The metrics are computed with

@@ -17,7 +17,8 @@ basin hopping as the global search beyond it. Library code: no printing; the CLI
   the best basin was found more than once. Otherwise it stops after ``rounds`` rounds or when the
   starts' CPU time exceeds ``budget_cpu_h``.
 - **Distinct minima**: the finished starts grouped by final merit (a new group where the merit rises by
-  more than ``agree`` over the group's best), best first, as CODE V's Global Synthesis lists alternatives.
+  more than ``agree`` over the group's best), best first, as CODE V's Global Synthesis lists alternatives;
+  each with its best start's ESR on ``esr_sampling`` and on the seed's measure (``seed_esr_um``).
 - **Resume**: every finished start is written atomically as it finishes (``OUTDIR/points``, as a sweep's
   tasks); a run into the same folder with the same spec and settings skips them, and the basin chains
   are rebuilt from the records (the keep rule is deterministic). Ctrl-C keeps every finished start.
@@ -157,7 +158,8 @@ def minima(records: list[dict[str, Any]], agree: float) -> list[dict[str, Any]]:
             groups[-1]["members"].append(r["name"])
             continue
         groups.append({"rank": len(groups) + 1, "merit": r["merit"], "esr_um": r.get("esr_um"),
-                       "esr_opt_um": r.get("esr_opt_um"), "best": r["name"], "count": 1, "members": [r["name"]]})
+                       "seed_esr_um": r.get("seed_esr_um"), "esr_opt_um": r.get("esr_opt_um"), "best": r["name"],
+                       "count": 1, "members": [r["name"]]})
     return groups
 
 

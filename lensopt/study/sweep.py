@@ -203,12 +203,12 @@ def run_task(settings: Settings, task: Task, *, engine: Engine | None = None) ->
             if result.interrupted:  # Ctrl-C in a serial run: the start is not finished
                 raise KeyboardInterrupt
             merit, physical, reason, esr_opt = _final_merit(result.spec, settings, engine=engine)
-            esr = _report_esr(result.spec, settings, engine=engine) if physical else None
+            esr, seed_esr = _report_esr(result.spec, settings, engine=engine) if physical else (None, None)
         except LensoptError as err:  # the start cannot run, or its result cannot be evaluated
             record.update(status="failed", reason=str(err), wall_s=time.perf_counter() - t0)
             return record, None
         record.update(status="finished" if physical else "failed", reason=reason, merit=merit,
-                      esr_um=esr, esr_opt_um=esr_opt, steps=result.steps,
+                      esr_um=esr, seed_esr_um=seed_esr, esr_opt_um=esr_opt, steps=result.steps,
                       stop_reason=result.stop_reason, start_merit=result.start_merit,
                       start_esr_opt_um=result.start_esr_um, warning=result.warning,
                       bound=[b.name for b in result.bound], wall_s=time.perf_counter() - t0)
@@ -237,15 +237,18 @@ def _final_merit(spec: LensSpec, settings: Settings, *, engine: Engine | None = 
     return 0.5 * float((r**2).sum()), True, "", 1e3 * problem.esr_mm(ev.residuals)
 
 
-def _report_esr(spec: LensSpec, settings: Settings, *, engine: Engine | None = None) -> float | None:
-    """ESR in µm as ``lensopt trace`` / ``lensopt optimize`` report it (None when rays fail)."""
-    from lensopt.analysis.report import trace_report
+def _report_esr(spec: LensSpec, settings: Settings, *,
+                engine: Engine | None = None) -> tuple[float | None, float | None]:
+    """(ESR in µm as ``lensopt trace`` / ``lensopt optimize`` report it, ESR in µm on the seed's measure
+    (``analysis.report.seed_esr_um``)); None when rays fail."""
+    from lensopt.analysis.report import seed_esr_um, trace_report
     from lensopt.optics.sampling import PupilSampling
     from lensopt.spec.build import build
 
-    rep = trace_report(build(spec), PupilSampling.parse(settings.esr_sampling, seed=settings.seed, weighted=True),
+    model = build(spec)
+    rep = trace_report(model, PupilSampling.parse(settings.esr_sampling, seed=settings.seed, weighted=True),
                        engine=engine)
-    return rep["effective_spot_radius_um"]
+    return rep["effective_spot_radius_um"], seed_esr_um(model, engine=engine)
 
 
 # ------------------------------------------------------------------------------- resume, output
@@ -323,8 +326,9 @@ def best_of(records: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
 
 
 def table(points: Sequence[Point], records: dict[tuple[int, int], dict[str, Any]], starts: int) -> list[dict[str, Any]]:
-    """One row per point: the swept values, the best start's ESR (µm), merit, steps, stop reason, and
-    how many starts finished or failed; ``wall_s`` is the sum over the point's tasks."""
+    """One row per point: the swept values, the best start's ESR (µm; ``--esr-sampling`` and the seed's
+    measure), merit, steps, stop reason, and how many starts finished or failed; ``wall_s`` is the sum over
+    the point's tasks. A record written before the seed's measure was reported has none (None)."""
     rows = []
     for p in points:
         recs = [records[(p.index, k)] for k in range(starts) if (p.index, k) in records]
@@ -339,6 +343,8 @@ def table(points: Sequence[Point], records: dict[tuple[int, int], dict[str, Any]
             "starts_finished": sum(r["status"] == "finished" for r in recs),
             "starts_failed": sum(r["status"] == "failed" for r in recs),
             "wall_s": sum(r.get("wall_s", 0.0) for r in recs),
+            # Last, so that the columns of sweep.csv before it keep their places.
+            "best_seed_esr_um": best.get("seed_esr_um") if best else None,
         })
     return rows
 

@@ -54,7 +54,31 @@ def test_shipped_lenses_pass_and_junit_has_one_case_per_lens_and_metric(tmp_path
         cases = [c.get("name") for c in suite.iter("testcase")]
         assert sorted(cases) == sorted(base[name]["metrics"])
         assert "efl_mm" in cases and "esr_um" in cases and any(c.startswith("rms_um@") for c in cases)
+        assert "seed_esr_um" in cases
     assert root.get("failures") == "0"
+
+
+def test_the_baseline_holds_the_seeds_measure_and_the_report_shows_it() -> None:
+    # The recorded ESR on the seed's measure is ``seed_esr`` of the lens, computed here; for the C-mount it is
+    # issue 25's 13.438 µm ("lensopt now", C-mount 4P).
+    import torch
+
+    from lensopt.analysis.spot import seed_esr
+    from lensopt.spec import build, load_spec
+
+    lens = ROOT / "lenses" / "cmount_4p.json"
+    model = build(load_spec(lens))
+    with torch.no_grad():
+        want = 1e3 * float(seed_esr(model.lens, model.system))
+    recorded = json.loads(BASELINE.read_text())["lenses"][lens.name]["metrics"]["seed_esr_um"]
+    assert recorded == pytest.approx(want, abs=1e-9) and abs(recorded - 13.438) <= 1e-3
+    r = runner.invoke(app, ["check", str(lens), "--baseline", str(BASELINE)])
+    assert r.exit_code == 0, r.output
+    assert f"seed's measure (11 fields, grid:61) {want:.3f} µm" in r.output
+    js = runner.invoke(app, ["check", str(lens), "--baseline", str(BASELINE), "--json"])
+    metrics = {m["metric"]: m for m in json.loads(js.stdout)["lenses"][0]["metrics"]}
+    assert metrics["seed_esr_um"]["value"] == pytest.approx(want, abs=1e-9) and metrics["seed_esr_um"]["passed"]
+    assert metrics["seed_esr_um"]["tolerance"] == 1e-3
 
 
 def test_a_thickness_plus_10_um_fails_with_a_table_then_update_passes(tmp_path) -> None:
@@ -115,8 +139,8 @@ def test_bad_input_is_one_line_exit_2(tmp_path) -> None:
 def test_check_tolerances_from_the_spec_loosen_a_metric(tmp_path) -> None:
     def looser(d):
         d["surfaces"][5]["thickness"] += 0.01  # the image gap: only TTL moves (EFL, BFL, spots do not... much)
-        d["check"] = {"tolerances": {"ttl_mm": 0.02, "rms_um": 10.0, "esr_um": 10.0, "distortion_percent": 1.0,
-                                     "ri": 0.01, "margin": 1.0}}
+        d["check"] = {"tolerances": {"ttl_mm": 0.02, "rms_um": 10.0, "esr_um": 10.0, "seed_esr_um": 10.0,
+                                     "distortion_percent": 1.0, "ri": 0.01, "margin": 1.0}}
 
     r = runner.invoke(app, ["check", str(_copy(tmp_path, looser)), "--baseline", str(BASELINE)])
     assert r.exit_code == 0, r.output

@@ -45,6 +45,15 @@ def test_sweep_json_resume_and_mismatch(tmp_path: Path) -> None:
     assert (out / "sweep.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     again = json.loads(runner.invoke(app, _args(spec, out, "--json")).stdout)
     assert again["computed"] == 0 and again["skipped"] == 4
+    # The table (80 columns in a pipe) shows the seed's measure beside the ESR, as in the JSON.
+    shown = runner.invoke(app, _args(spec, out), env={"COLUMNS": ""})
+    assert shown.exit_code == 0, shown.output
+    lines = shown.stdout.split(" task(s) run, ")[0].splitlines()[:-1]  # the table, not the list of files
+    assert max(map(len, lines)) <= 80 and "seed's" in lines[2]
+    for p in doc["points"]:
+        first = [str(p["point"]), f"{p['optimize.solves[0].value']:g}"]
+        row = next(ln.split() for ln in lines if ln.split()[:2] == first)
+        assert row[2:4] == [f"{p['best_esr_um']:.4g}", f"{p['best_seed_esr_um']:.4g}"]
     bad = runner.invoke(app, _args(spec, out, "--perturb", "0.1"))
     assert bad.exit_code == 2
     assert bad.stderr.strip().splitlines() == [bad.stderr.strip()]

@@ -49,6 +49,35 @@ def test_written_lens_traces_to_the_optimizers_numbers(tmp_path: Path, make_cook
     assert not list(tmp_path.glob(".*part*"))  # nothing half-written left behind
 
 
+def test_summary_reports_the_seeds_measure_of_both_lenses(tmp_path: Path) -> None:
+    # The ESR on the seed's measure (11 fields, grid:61) beside the spec's own, for the start and the written
+    # lens, each equal to ``analysis.spot.seed_esr`` of that lens computed here; the shipped C-mount start
+    # is issue 25's 13.438 µm.
+    from rich.console import Console
+
+    from lensopt.analysis.spot import seed_esr
+    from lensopt.cli.optimize import render_summary
+
+    start = Path(__file__).resolve().parents[2] / "lenses" / "cmount_4p.json"
+    out = tmp_path / "lens.json"
+    r = runner.invoke(app, ["optimize", str(start), "-o", str(out), "--steps", "1", "--json", "-q",
+                            "--allow-violations"])
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.stdout)
+    assert s["seed_measure"] == {"fields": 11, "sampling": "grid:61"}
+    with torch.no_grad():
+        for key, path in (("start", start), ("final", out)):
+            model = build(load_spec(path))
+            assert s[key]["seed_esr_um"] == pytest.approx(1e3 * float(seed_esr(model.lens, model.system)), rel=1e-12)
+    assert abs(s["start"]["seed_esr_um"] - 13.438) <= 1e-3
+    assert s["final"]["seed_esr_um"] != s["start"]["seed_esr_um"]  # one step moved the lens
+    console = Console(record=True, width=80)
+    render_summary(console, s)
+    text = console.export_text()
+    assert (f"ESR, seed's measure (11 fields, grid:61): {s['start']['seed_esr_um']:.4f} µm → "
+            f"{s['final']['seed_esr_um']:.4f} µm") in text
+
+
 def test_written_values_reproduce_the_final_residuals(make_cooke) -> None:  # noqa: ANN001
     # The lens file holds the optimizer's lens: rebuilt from it, the residual function gives the same
     # vector (to the last few ulps: radii are written as 1/c).

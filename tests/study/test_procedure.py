@@ -11,9 +11,11 @@ import json
 from pathlib import Path
 
 import pytest
+import torch
 
+from lensopt.analysis.spot import seed_esr
 from lensopt.errors import LensoptError
-from lensopt.spec import load_spec, parse_spec
+from lensopt.spec import build, load_spec, parse_spec
 from lensopt.study.procedure import ProcedureSettings, agreement, minima, run_procedure
 
 COOKE = Path(__file__).resolve().parents[2] / "specs" / "cooke_triplet_opt.toml"
@@ -45,6 +47,12 @@ def test_multistart_rounds_resume_and_minima(tmp_path: Path) -> None:
     # Minima: the finished starts by merit, best first; each start in exactly one group.
     merits = [m["merit"] for m in res.minima]
     assert merits == sorted(merits) and sum(m["count"] for m in res.minima) == 4
+    # Each minimum reports its best start's ESR on the seed's measure, that of the lens on disk (computed here).
+    for m in doc["minima"]:
+        model = build(load_spec(out / "points" / f"{m['best']}.lens.json"))
+        with torch.no_grad():
+            want = 1e3 * float(seed_esr(model.lens, model.system))
+        assert m["seed_esr_um"] == on_disk[m["best"]]["seed_esr_um"] == pytest.approx(want, rel=1e-12)
     # Resume with one more round: the four starts are read back, two more run.
     again = run_procedure(spec, text, ProcedureSettings(starts=2, rounds=3, steps=3, agree=1e-9,
                                                         esr_sampling="rings:3"), out, callback=events.append)

@@ -15,9 +15,10 @@ import pytest
 import torch
 
 import lensopt.study.sweep as sw
+from lensopt.analysis.spot import seed_esr
 from lensopt.design import build_problem, optimize
 from lensopt.errors import LensoptError
-from lensopt.spec import load_spec
+from lensopt.spec import build, load_spec
 from lensopt.spec.io import dump_json
 from lensopt.study.keys import parse_vary, set_key
 from lensopt.study.sweep import Settings, perturbed_spec, run_sweep
@@ -99,8 +100,14 @@ def test_best_is_the_minimum_of_the_starts_on_disk(serial: tuple[Path, sw.SweepR
         assert row["best_start"] == k and row["best_esr_um"] == recs[k]["esr_um"]
         assert (out / f"best_{row['point']}.json").read_bytes() == \
                (out / "points" / f"{row['point']}_{k}.lens.json").read_bytes()
+        # The seed's measure of the best lens, beside the ESR: ``seed_esr`` of the lens file, computed here.
+        model = build(load_spec(out / f"best_{row['point']}.json"))
+        with torch.no_grad():
+            want = 1e3 * float(seed_esr(model.lens, model.system))
+        assert row["best_seed_esr_um"] == recs[k]["seed_esr_um"] == pytest.approx(want, rel=1e-12)
     csv_lines = (out / "sweep.csv").read_text().splitlines()
     assert csv_lines[0].startswith("point,optimize.solves[0].value,best_esr_um,best_merit,best_start")
+    assert csv_lines[0].endswith(",wall_s,best_seed_esr_um")  # added last: the columns before keep their places
     assert len(csv_lines) == 3 and csv_lines[1].startswith("0,48.0,")
 
 
