@@ -1,9 +1,11 @@
 """Issue 13 measurements: ``lensopt accuracy`` on the Cooke triplet and the C-mount lens, the 1 %-ESR
-recommendation checked on a third lens, and the wall time of the ray-heavy commands per trace backend.
+recommendation checked on a third lens, and the wall time of the ray-heavy commands per trace backend;
+issue 29: part ``defaults``, the reporting default gauss:16 against the old rings:24 and each lens's
+optimizer sampling on every shipped lens (benchmarks/accuracy/results_accuracy_defaults.json).
 
     .venv/bin/python benchmarks/accuracy/accuracy_study.py [--part accuracy,third,commands] [--repeats 3]
 
-Part ``accuracy`` writes benchmarks/accuracy/results_accuracy_<lens>.json and benchmarks/accuracy_<lens>.png (the
+Part ``accuracy`` writes its lens in benchmarks/accuracy/results_accuracy_knobs.json and accuracy_<lens>.png (the
 plot ``lensopt accuracy -o`` draws) and prints markdown tables. Part ``third`` takes each lens's
 recommended setting for a 1 % ESR target and measures its ESR error on specs/double_gauss.toml against
 that lens's own converged reference. Part ``commands`` runs ``lensopt trace --sampling rings:32`` and
@@ -41,6 +43,15 @@ ROOT = Path(__file__).resolve().parents[2]
 BENCH = ROOT / "benchmarks" / "accuracy"
 LENSES = {"cooke": ROOT / "specs" / "cooke_triplet.toml", "cmount": ROOT / "lenses" / "cmount_4p.json"}
 THIRD = ROOT / "specs" / "double_gauss.toml"
+KNOBS_JSON = BENCH / "results_accuracy_knobs.json"  # {lens key: what ``lensopt accuracy --json`` prints, + runs}
+
+
+def _records() -> dict:
+    return json.loads(KNOBS_JSON.read_text()) if KNOBS_JSON.exists() else {}
+
+
+def _record(key: str, data: dict) -> None:
+    KNOBS_JSON.write_text(json.dumps({**_records(), key: data}, indent=1))
 
 
 def part_accuracy(repeats: int, keys: list[str], knobs: tuple[str, ...], merge: bool = False) -> dict:
@@ -51,10 +62,9 @@ def part_accuracy(repeats: int, keys: list[str], knobs: tuple[str, ...], merge: 
         t0 = time.perf_counter()
         res = run_accuracy(model, knobs=knobs, repeats=repeats)
         wall, load = time.perf_counter() - t0, os.getloadavg()
-        old = BENCH / f"results_accuracy_{key}.json"
         runs = []
-        if merge and old.exists():  # keep the recorded points of the knobs not measured now (one table per lens)
-            prev = json.loads(old.read_text())
+        if merge and key in _records():  # keep the recorded points of the knobs not measured now (one table per lens)
+            prev = _records()[key]
             kept = [Point(p["knob"], p["setting"], p["errors"], p["time_s"], p.get("note", ""))
                     for p in prev["points"] if p["knob"] not in knobs]
             res.points = kept + res.points
@@ -68,7 +78,7 @@ def part_accuracy(repeats: int, keys: list[str], knobs: tuple[str, ...], merge: 
         data["wall_s"] = wall
         data["load"] = load
         data["runs"] = runs + [{"knobs": list(knobs), "repeats": repeats, "wall_s": wall, "load": load}]
-        (BENCH / f"results_accuracy_{key}.json").write_text(json.dumps(data, indent=1))
+        _record(key, data)
         save_figure(accuracy_figure(data, title=model.spec.name), BENCH / f"accuracy_{key}.png", dpi=120)
         out[key] = data
         print(f"\n### {model.spec.name} ({path.relative_to(ROOT)}), {data['wall_s']:.0f} s, load {data['load']}\n")
@@ -108,7 +118,7 @@ def esr_error(model, setting: str) -> tuple[float, float]:  # type: ignore[no-un
 def part_third(results: dict) -> None:
     """Each lens's 1 % ESR recommendation (from ``results`` or the recorded JSON) on the third lens."""
     if not results:
-        results = {k: json.loads((BENCH / f"results_accuracy_{k}.json").read_text()) for k in LENSES}
+        results = {k: v for k, v in _records().items() if k in LENSES}
     third = build(load_spec(THIRD))
     print(f"\n### 1 % ESR recommendation checked on {THIRD.relative_to(ROOT)}\n")
     print("| recommended on | setting | its error there | error on the third lens | meets 1 %? |")
@@ -190,15 +200,77 @@ def part_illumination(grid: int) -> None:
               flush=True)
 
 
+DEFAULTS = ("gauss:16", "rings:24")  # the reporting default since issue 29, and the trace default before it
+
+
+def part_defaults(repeats: int) -> dict:
+    """Issue 29: the reporting default ``gauss:16`` against the old ``rings:24`` and the lens's own optimizer
+    sampling, on every shipped lens: ESR and worst-field RMS error against the converged quadrature reference
+    (``qa.accuracy.spot_reference``), and the time of the spot computation (points, eager trace, weighted
+    spot statistics) as wall and CPU medians of ``repeats`` runs, 1 thread. The ESR of each setting is
+    cross-checked against what ``lensopt trace`` reports (``analysis.report.trace_report``)."""
+    from lensopt.analysis.report import trace_report
+    from lensopt.engine import Engine
+
+    engine = Engine()  # eager: no compilation inside a timing
+    rows = []
+    for path in sorted(p for p in (ROOT / "lenses").glob("*.json") if p.name != "check_baseline.json"):
+        spec = load_spec(path)
+        model = build(spec)
+        lens, system = model.lens, model.system
+        fw = torch.tensor(system.field_weights, dtype=lens.dtype) if system.field_weights else None
+        ref = spot_reference(model, engine=engine)
+        opt = spec.optimize.sampling if spec.optimize is not None else None
+        settings = [*DEFAULTS, *([opt] if opt and opt not in DEFAULTS else [])]
+        row = {"lens": path.name, "name": spec.name, "wavelengths": int(lens.wavelength_um.numel()),
+               "fields": len(system.rel_field), "aim": system.aim, "reference": ref, "optimizer_sampling": opt,
+               "settings": {}}
+        for text in settings:
+            ps = PupilSampling.parse(text, weighted=True)
+
+            def run(ps: PupilSampling = ps, lens=lens, system=system, fw=fw):  # type: ignore[no-untyped-def]
+                with torch.no_grad():
+                    pts = ps.points(dtype=lens.dtype, engine=engine)
+                    wts = ps.weights(dtype=lens.dtype)
+                    b = trace_bundle(lens, system, pts, half_pupil=ps.half, engine=engine)
+                    return weighted_spot(b, torch.ones(pts.shape[0], dtype=lens.dtype) if wts is None else wts,
+                                         system.wavelength_weights, fw)
+
+            run()  # warm
+            walls, cpus = [], []
+            for _ in range(repeats):
+                w0, c0 = time.perf_counter(), time.process_time()
+                esr, rms = run()
+                walls.append(time.perf_counter() - w0)
+                cpus.append(time.process_time() - c0)
+            shown = trace_report(model, ps, engine=engine)["effective_spot_radius_um"]
+            e_esr = abs(1e3 * float(esr) - ref["esr_um"]) / ref["esr_um"]
+            e_rms = float(np.max(np.abs(1e3 * rms.numpy() - np.array(ref["rms_um"])) / np.array(ref["rms_um"])))
+            row["settings"][text] = {"rays_per_field_wavelength": int(ps.count), "esr_um": 1e3 * float(esr),
+                                     "esr_um_trace_report": shown, "esr_error": e_esr, "rms_error_worst_field": e_rms,
+                                     "wall_ms": 1e3 * float(np.median(walls)), "cpu_ms": 1e3 * float(np.median(cpus))}
+        rows.append(row)
+        g, r = row["settings"]["gauss:16"], row["settings"]["rings:24"]
+        o = row["settings"].get(opt) if opt not in DEFAULTS else None
+        print(f"| {path.name} | {100 * g['esr_error']:.2g} | {g['wall_ms']:.1f} ({g['cpu_ms']:.1f}) | "
+              f"{100 * r['esr_error']:.2g} | {r['wall_ms']:.1f} ({r['cpu_ms']:.1f}) | "
+              f"{g['wall_ms'] / r['wall_ms']:.2f} | "
+              + (f"{opt}: {100 * o['esr_error']:.2g}, {o['wall_ms']:.1f} ({o['cpu_ms']:.1f})" if o else "—") + " |",
+              flush=True)
+    data = {"command": "OMP_NUM_THREADS=1 .venv/bin/python benchmarks/accuracy/accuracy_study.py --part defaults",
+            "repeats": repeats, "threads": torch.get_num_threads(), "load": os.getloadavg(), "lenses": rows}
+    (BENCH / "results_accuracy_defaults.json").write_text(json.dumps(data, indent=1))
+    return data
+
+
 KEEP = {"rings": ("rings:4", "rings:16", "rings:64"), "rings_fixed": ("rings:16:nojitter", "rings:64:nojitter"),
         "grid": ("grid:8", "grid:16", "grid:24", "grid:32", "grid:48", "grid:96"),
         "float32": ("rings:16 float32", "rings:64 float32"), "compiled": ("rings:16 compiled", "rings:64 compiled")}
 
 
 def summarize() -> None:
-    """Condensed markdown of the recorded results_accuracy_*.json (every point is in the JSON)."""
-    data = {k: json.loads((BENCH / f"results_accuracy_{k}.json").read_text()) for k in LENSES
-            if (BENCH / f"results_accuracy_{k}.json").exists()}
+    """Condensed markdown of the recorded results_accuracy_knobs.json (every point is in the JSON)."""
+    data = {k: v for k, v in _records().items() if k in LENSES}
     print("| knob | setting | " + " | ".join(f"{k} error | {k} s" for k in data) + " |")
     print("| --- | --- | " + " | ".join("--- | ---" for _ in data) + " |")
     first = next(iter(data.values()))
@@ -225,7 +297,7 @@ def summarize() -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--part", default="accuracy,third,commands")
+    ap.add_argument("--part", default="accuracy,third,commands", help="also: defaults, illumination, summary")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--lenses", default="cooke_triplet_opt,cmount_4p", help="shipped lenses for --part commands")
     ap.add_argument("--accuracy-lenses", default="cooke,cmount", help="lenses of --part accuracy")
@@ -236,7 +308,7 @@ def main() -> None:
     ap.add_argument("--commands-json", default="results_backend_commands.json",
                     help="--part commands: file name under benchmarks/")
     ap.add_argument("--merge", action="store_true",
-                    help="--part accuracy: keep the recorded points of the other knobs in results_accuracy_<lens>.json")
+                    help="--part accuracy: keep the recorded points of the other knobs in results_accuracy_knobs.json")
     ap.add_argument("--commands", default=None,
                     help="e.g. 'trace rings:32,trace rings:64,plot psf,simulate,evaluate' (default: all)")
     a = ap.parse_args()
@@ -246,6 +318,11 @@ def main() -> None:
         return
     torch.set_num_threads(int(os.environ.get("OMP_NUM_THREADS", "2")))
     print(f"load before: {os.getloadavg()}")
+    if "defaults" in parts:
+        print("\n| lens | gauss:16 ESR error % | ms wall (CPU) | rings:24 ESR error % | ms wall (CPU) | time ratio | "
+              "optimizer sampling: error %, ms |")
+        print("| --- | --- | --- | --- | --- | --- | --- |")
+        part_defaults(a.repeats)
     results = (part_accuracy(a.repeats, a.accuracy_lenses.split(","), tuple(a.knobs.split(",")), a.merge)
                if "accuracy" in parts else {})
     if "third" in parts:

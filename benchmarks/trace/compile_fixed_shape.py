@@ -139,6 +139,143 @@ def parent(lenses: list[str], warm: int, repeats: int, kind: str, json_out: Path
         json_out.write_text(json.dumps(results, indent=1))
 
 
+def study(lens_path: str, n: int, repeats: int, chunks: list[int], json_out: Path | None,
+          cache: str | None = None) -> dict:
+    """Issue 29: why the AOT package ran at a third of in-process ``torch.compile``. One process, one thread,
+    a private empty Inductor cache; ``n`` rays of ``trace_speed.make_rays`` (every field × wavelength,
+    uniform pupil). Variants, timed interleaved (median wall and CPU of ``repeats`` calls on all ``n`` rays):
+
+    - ``compiled``: ``torch.compile`` of ``trace_kernel`` in process, chunks of ``dispatch.COMPILED_CHUNK``;
+    - ``aot trace@C``: a package exported from the reference ``trace`` (what ``accel.aot`` built before
+      issue 29), chunks of C rays;
+    - ``aot kernel@C``: a package exported from ``trace_kernel``, the graph ``torch.compile`` compiles
+      (the per-wavelength n/n' table passed in, near-root quadrics, component-major outputs), chunks of C;
+    - ``aot kernel@C (runner only)``: the package's ``run`` on pre-made chunks, without the dispatch's
+      padding, copies and concatenation;
+    - ``compiled, one call``: ``compiled_trace`` on all ``n`` rays at once, made component-major before the
+      clock (how benchmarks/trace/trace_speed.py measures the compiled trace); ``eager``: ``trace``.
+
+    ``cache``: an Inductor cache folder of an earlier run whose packages are reused (their build cost is
+    the earlier run's, kept in the JSON).
+    """
+    cache = cache or tempfile.mkdtemp(prefix="lensopt_inductor_study_")
+    os.environ["TORCHINDUCTOR_CACHE_DIR"] = cache
+    import torch
+
+    from lensopt.accel import aot, dispatch
+    from lensopt.accel.compiled import compiled_trace, component_major_rays, near_only_surfaces
+    from lensopt.optics.lens import Lens
+    from lensopt.optics.trace import KernelOptions, Rays, index_ratio, trace, trace_kernel
+
+    sys.path.insert(0, str(ROOT / "benchmarks" / "trace"))
+    from trace_speed import make_rays
+
+    torch.set_num_threads(1)
+    model, rays = make_rays(Path(lens_path), n)
+    lens = model.lens
+    n = rays.pos.shape[0]
+    names = aot._LENS_TENSORS
+    opts = KernelOptions(near_only=near_only_surfaces(lens))
+
+    class Ref(torch.nn.Module):  # the graph accel.aot exported before issue 29
+        def forward(self, *ts):  # type: ignore[no-untyped-def]
+            f = dict(zip(names, ts[:8], strict=True))
+            r = trace(Lens(shapes=lens.shapes, stop=lens.stop, **f), Rays(*ts[8:11]))
+            return r.pos, r.dir, r.status, r.backtrack
+
+    class Kernel(torch.nn.Module):  # the graph accel.compiled compiles
+        def forward(self, *ts):  # type: ignore[no-untyped-def]
+            f = dict(zip(names, ts[:8], strict=True))
+            r = trace_kernel(Lens(shapes=lens.shapes, stop=lens.stop, **f), Rays(*ts[8:11]), opts, ratio=ts[11])
+            return r.pos, r.dir, r.status, r.backtrack
+
+    lens_args = [getattr(lens, k).detach().contiguous() for k in names]
+    ratio = index_ratio(lens).contiguous()
+
+    def inputs(c: int, j: int = 0, kernel: bool = True) -> list:  # chunk j, component-major rays
+        sl = slice(j * c, (j + 1) * c)
+        pos = rays.pos[sl].t().contiguous().t()
+        dir = rays.dir[sl].t().contiguous().t()
+        return [*lens_args, pos, dir, rays.wavelength[sl].contiguous()] + ([ratio] if kernel else [])
+
+    def build(module: torch.nn.Module, c: int, kernel: bool) -> tuple:
+        import torch._inductor
+
+        path = Path(cache) / f"{type(module).__name__}_{c}.pt2"
+        if path.exists():
+            return aot.load_package(path), None
+        w0, c0 = time.perf_counter(), time.process_time()
+        with torch.no_grad():
+            prog = torch.export.export(module, tuple(inputs(c, 0, kernel)), strict=False)
+            torch._inductor.aoti_compile_and_package(prog, package_path=str(path),
+                                                     inductor_configs={"max_fusion_size": aot._MAX_FUSION_SIZE})
+        cost = {"build_wall_s": time.perf_counter() - w0, "build_cpu_s": time.process_time() - c0}
+        return aot.load_package(path), cost
+
+    def chunked(runner, c: int, kernel: bool):  # type: ignore[no-untyped-def]
+        def fn(lens_, r, **kw):  # type: ignore[no-untyped-def]
+            from lensopt.optics.trace import RayTrace
+            a = [*lens_args, r.pos, r.dir, r.wavelength.contiguous()] + ([ratio] if kernel else [])
+            pos, dir, status, back = runner.run(a)
+            return RayTrace(pos=pos, dir=dir, status=status, backtrack=back, hits=(), failed_at=None)
+        return lambda: dispatch._compiled_in_chunks(fn, lens, rays, size=c)
+
+    variants: dict = {}
+    info: dict = {"lens": Path(lens_path).name, "rays": n, "threads": torch.get_num_threads(),
+                  "compiled_chunk": dispatch.COMPILED_CHUNK, "torch": torch.__version__}
+    with torch.no_grad():
+        ref = trace(lens, rays)
+        w0, c0 = time.perf_counter(), time.process_time()
+        variants["compiled"] = lambda: dispatch._compiled_in_chunks(compiled_trace, lens, rays,
+                                                                    size=dispatch.COMPILED_CHUNK)
+        variants["compiled"]()
+        info["compiled_first_call"] = {"wall_s": time.perf_counter() - w0, "cpu_s": time.process_time() - c0}
+        cm = component_major_rays(rays)
+        variants["compiled, one call"] = lambda: compiled_trace(lens, cm, fallback=False)
+        w0, c0 = time.perf_counter(), time.process_time()
+        variants["compiled, one call"]()
+        info["compiled_one_call_first_call"] = {"wall_s": time.perf_counter() - w0, "cpu_s": time.process_time() - c0}
+        variants["eager"] = lambda: trace(lens, rays)
+        for c in chunks:
+            for module, kernel in ((Ref(), False), (Kernel(), True)):
+                runner, cost = build(module, c, kernel)
+                name = f"aot {'kernel' if kernel else 'trace'}@{c}"
+                if cost is not None:
+                    info[name + " build"] = cost
+                variants[name] = chunked(runner, c, kernel)
+                if kernel:
+                    pre = [inputs(c, j, True) for j in range(n // c)]
+                    variants[name + " (runner only)"] = lambda runner=runner, pre=pre: [runner.run(a) for a in pre]
+                print(f"built {name}: {cost}", flush=True)
+        checks = {}
+        for name, fn in variants.items():
+            if "runner only" in name:
+                continue
+            out = fn()
+            checks[name] = {"max_diff_mm": float((out.pos - ref.pos)[ref.valid].abs().max()),
+                            "same_status": bool(torch.equal(out.status, ref.status))}
+        times: dict = {k: {"wall": [], "cpu": []} for k in variants}
+        for _ in range(repeats):
+            for name, fn in variants.items():
+                w0, c0 = time.perf_counter(), time.process_time()
+                fn()
+                times[name]["wall"].append(time.perf_counter() - w0)
+                times[name]["cpu"].append(time.process_time() - c0)
+    base = statistics.median(times["compiled"]["wall"])
+    rows = {k: {"wall_ms": 1e3 * statistics.median(v["wall"]), "cpu_ms": 1e3 * statistics.median(v["cpu"]),
+                "wall_vs_compiled": statistics.median(v["wall"]) / base, **checks.get(k, {})} for k, v in times.items()}
+    res = {**info, "repeats": repeats, "load": os.getloadavg(), "variants": rows}
+    for k, v in rows.items():
+        print(f"| {k} | {v['wall_ms']:.1f} | {v['cpu_ms']:.1f} | {v['wall_vs_compiled']:.2f} |", flush=True)
+    if json_out is not None:
+        data = json.loads(json_out.read_text()) if json_out.exists() else {}
+        old = data.get("aot_vs_compiled", {})
+        res = {**{k: v for k, v in old.items() if k.endswith(" build")}, **res}  # builds of reused packages
+        data["aot_vs_compiled"] = res
+        json_out.write_text(json.dumps(data, indent=1))
+    return res
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--child", default=None)
@@ -148,8 +285,17 @@ def main() -> None:
     ap.add_argument("--json", default=None)
     ap.add_argument("--kind", default="aot", choices=("aot", "compiled"),
                     help="aot: the AOT package (accel.aot); compiled: torch.compile in the process")
+    ap.add_argument("--study", action="store_true", help="issue 29: AOT package variants against torch.compile "
+                    "in one process (--lenses: one lens; --rays, --chunks)")
+    ap.add_argument("--rays", type=int, default=1 << 20)
+    ap.add_argument("--chunks", default="16384,65536")
+    ap.add_argument("--study-cache", default=None, help="--study: reuse the packages of this Inductor cache folder")
     a = ap.parse_args()
-    if a.child:
+    if a.study:
+        name = a.lenses.split(",")[0]
+        study(str(ROOT / name if "/" in name else ROOT / "lenses" / f"{name}.json"), a.rays, a.repeats,
+              [int(c) for c in a.chunks.split(",")], Path(a.json) if a.json else None, a.study_cache)
+    elif a.child:
         print(json.dumps(child(a.child, a.repeats, a.kind)))
     else:
         parent(a.lenses.split(","), a.warm, a.repeats, a.kind, Path(a.json) if a.json else None)

@@ -36,10 +36,11 @@ from typing import Any
 import torch
 from torch import Tensor
 
+from lensopt.accel.compiled import near_only_surfaces
 from lensopt.files import atomic_path
 from lensopt.optics.intersect import NEWTON_ITERATIONS
 from lensopt.optics.lens import Lens
-from lensopt.optics.trace import Rays, RayTrace, SurfaceHit, trace
+from lensopt.optics.trace import KernelOptions, Rays, RayTrace, SurfaceHit, index_ratio, trace_kernel
 
 __all__ = ["AOT_CHUNK", "package_dir", "package_path", "has_package", "is_loaded", "mark_broken", "build_package",
            "load_package", "unload_package",
@@ -91,7 +92,7 @@ def _sources() -> str:
 def _structure(lens: Lens, upto: int | None, record: bool, newton_iterations: int) -> tuple:
     return (tuple(repr(s) for s in lens.shapes), lens.stop, upto, record, newton_iterations, str(lens.dtype),
             lens.device.type, tuple(tuple(getattr(lens, n).shape) for n in _LENS_TENSORS), AOT_CHUNK,
-            torch.__version__, _sources())
+            near_only_surfaces(lens), "kernel", torch.__version__, _sources())
 
 
 def describe(lens: Lens, upto: int | None = None, record: bool = False) -> str:
@@ -138,19 +139,25 @@ def is_loaded(lens: Lens, *, upto: int | None = None, record: bool = False,
 
 
 class _Flat(torch.nn.Module):
-    """The trace as a function of flat tensors (what is exported): lens tensors, then rays."""
+    """The trace as a function of flat tensors (what is exported): lens tensors, rays, then the n/n' table.
+
+    It is ``trace.trace_kernel``, the formulation ``accel.compiled`` compiles in process (the refraction
+    table passed in, no far root on quadrics with 1 + κ ≥ 0, component-major outputs), not the reference
+    ``trace``: exported from the reference, the package ran at a third of the in-process compiled
+    trace's speed (issue 29; benchmarks/README.md, trace backends)."""
 
     def __init__(self, lens: Lens, upto: int | None, record: bool, newton_iterations: int) -> None:
         super().__init__()
         self.shapes, self.stop = lens.shapes, lens.stop
         self.upto, self.record, self.newton = upto, record, newton_iterations
+        self.options = KernelOptions(near_only=near_only_surfaces(lens))
 
     def forward(self, *tensors: Tensor) -> tuple[Tensor, ...]:
         fields = dict(zip(_LENS_TENSORS, tensors[:len(_LENS_TENSORS)], strict=True))
         lens = Lens(shapes=self.shapes, stop=self.stop, **fields)
-        pos, dir, wavelength = tensors[len(_LENS_TENSORS):]
-        r = trace(lens, Rays(pos, dir, wavelength), upto=self.upto, record=self.record,
-                  newton_iterations=self.newton)
+        pos, dir, wavelength, ratio = tensors[len(_LENS_TENSORS):]
+        r = trace_kernel(lens, Rays(pos, dir, wavelength), self.options, upto=self.upto, record=self.record,
+                         newton_iterations=self.newton, ratio=ratio)
         return _flatten(r)
 
 
@@ -170,14 +177,16 @@ def _unflatten(out: list[Tensor], record: bool) -> RayTrace:
 
 
 def _example(lens: Lens) -> tuple[Tensor, ...]:
-    """Inputs of the exported shape and layout: the lens tensors (contiguous) and ``AOT_CHUNK`` axial rays,
-    positions and directions component-major ((n, 3) views of (3, n) planes), wavelength indices int64."""
+    """Inputs of the exported shape and layout: the lens tensors (contiguous), ``AOT_CHUNK`` axial rays,
+    positions and directions component-major ((n, 3) views of (3, n) planes), wavelength indices int64,
+    and the (S, W) n/n' table."""
     n = AOT_CHUNK
     pos = torch.zeros(3, n, dtype=lens.dtype, device=lens.device)
     dir = torch.zeros(3, n, dtype=lens.dtype, device=lens.device)
     dir[2] = 1.0
     wavelength = torch.arange(n, device=lens.device) % lens.index.shape[-1]
-    return (*(getattr(lens, name).detach().contiguous() for name in _LENS_TENSORS), pos.t(), dir.t(), wavelength)
+    return (*(getattr(lens, name).detach().contiguous() for name in _LENS_TENSORS), pos.t(), dir.t(), wavelength,
+            index_ratio(lens).detach().contiguous())
 
 
 def build_package(lens: Lens, *, upto: int | None = None, record: bool = False,
@@ -226,5 +235,6 @@ def aot_trace(lens: Lens, rays: Rays, *, upto: int | None = None, record: bool =
     pos, dir = (v if v.movedim(-1, 0).is_contiguous() else v.movedim(-1, 0).contiguous().movedim(0, -1)
                 for v in (pos, dir))
     args = [getattr(lens, name).detach().contiguous() for name in _LENS_TENSORS]
-    args += [pos, dir, torch.broadcast_to(rays.wavelength, (n,)).to(torch.long).contiguous()]
+    args += [pos, dir, torch.broadcast_to(rays.wavelength, (n,)).to(torch.long).contiguous(),
+             index_ratio(lens).detach().contiguous()]
     return _unflatten(load_package(path).run(args), record)

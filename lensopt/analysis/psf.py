@@ -51,7 +51,7 @@ def _check(size: int, support: int, allow_even: bool = False) -> None:
     if size < 1 or (size % 2 == 0 and not allow_even):
         raise LensoptError("PSF grid size must be a positive odd number of bins", path="size", got=size)
     if support < 2 or support % 2:
-        raise LensoptError("KDE support must be an even number of bins ≥ 2 (S1.4.2)", path="support", got=support)
+        raise LensoptError("KDE support must be an even number of bins ≥ 2", path="support", got=support)
 
 
 def deposit(

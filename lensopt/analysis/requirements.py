@@ -256,7 +256,7 @@ def _field_checks(req: Requirements, summ: FieldSummary) -> list[Check]:
         out.append(Check("|distortion|", d, f"≤ {req.max_distortion_percent:g} %", d <= req.max_distortion_percent))
     if req.min_illumination is not None:
         ri = float(summ.ri_std.min())
-        out.append(Check("relative illumination (S52)", ri, f"≥ {req.min_illumination:g}",
+        out.append(Check("relative illumination (all rays)", ri, f"≥ {req.min_illumination:g}",
                          ri >= req.min_illumination, {"three_ray_min": float(summ.ri_three_ray.min())}))
     return out
 

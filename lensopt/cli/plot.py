@@ -195,7 +195,8 @@ def plot_field_cmd(lens: LensArg, output: OutOpt, sampling: SamplingOpt = "rings
                    points: Annotated[int, typer.Option("--points", min=2, max=401,
                                                        help="Field samples from axis to full field.")] = 21,
                    seed: SeedOpt = 0, dpi: DpiOpt = 150) -> None:
-    """Distortion (S48) and relative illumination (S51, S52) against field."""
+    """Distortion (spot centroid vs paraxial height) and relative illumination (three rays; all rays)
+    against field (seed S48, S51, S52)."""
     from lensopt.analysis.field import field_summary
     from lensopt.plot.field import field_figure
     from lensopt.plot.style import save_figure

@@ -55,9 +55,11 @@ def simulate(
                                         "--reference); off by default: it costs more than the simulation.")] = False,
     plan_only: Annotated[bool, typer.Option("--plan", help="Print the plan and stop (nothing simulated).")] = False,
     rays: Annotated[str, typer.Option("--rays", help="Pupil sampling per PSF (rings:N = 2N² rays).")] = "rings:32",
-    kernel: Annotated[str, typer.Option("--kernel", help="count | triangular | cosine (S1.4).")] = "triangular",
+    kernel: Annotated[str, typer.Option("--kernel", help="PSF from the rays: count (histogram) | "
+                                                       "triangular | cosine (kernel density).")] = "triangular",
     grid: Annotated[str | None, typer.Option("--grid", help="Force the PSF grid, e.g. 5x4.")] = None,
-    overlap: Annotated[float, typer.Option("--overlap", help="Overlap of patches (S1.5.2).")] = 0.25,
+    overlap: Annotated[float, typer.Option("--overlap", help="Overlap of neighbouring PSF patches, "
+                                                          "fraction of a patch.")] = 0.25,
     seed: SeedOpt = 0,
     as_json: JsonOpt = False,
     backend: BackendOpt = "auto",
@@ -233,7 +235,8 @@ def evaluate(
     count: Annotated[int, typer.Option("--count", help="Number of scenes (images: the first N by name).")] = 100,
     patch: Annotated[int, typer.Option("--patch", help="Central crop and sensor tile size, pixels.")] = 256,
     rays: Annotated[str, typer.Option("--rays", help="Pupil sampling per PSF (rings:N = 2N² rays).")] = "rings:32",
-    kernel: Annotated[str, typer.Option("--kernel", help="count | triangular | cosine (S1.4).")] = "triangular",
+    kernel: Annotated[str, typer.Option("--kernel", help="PSF from the rays: count (histogram) | "
+                                                       "triangular | cosine (kernel density).")] = "triangular",
     grid: Annotated[str | None, typer.Option("--grid", help="Force the PSF grid per tile, e.g. 3x3 "
                                              "(default: the simulation plan's choice).")] = None,
     noise: Annotated[float, typer.Option("--noise", help="Additive Gaussian noise σ, fraction of the maximum "

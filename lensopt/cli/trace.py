@@ -99,9 +99,9 @@ def _render_trace(r: dict[str, Any], *, wide: bool = False) -> None:
     fo = r["first_order"]
     t = compact_table(f"first-order data ({r['reference_nm']:g} nm)", [("quantity", "left"), ("value", "right"),
                                                                          ("unit", "left")])
-    labels = {"efl": "EFL", "bfl": "BFL (last surface to focus)", "ffl": "FFL (front focus from S1)",
-              "epd": "EPD", "entrance_pupil_z": "entrance pupil z (from S1)",
-              "exit_pupil_z": "exit pupil z (from S1)", "exit_pupil_diameter": "exit pupil diameter",
+    labels = {"efl": "EFL", "bfl": "BFL (last surface to focus)", "ffl": "FFL (front focus from surface 1)",
+              "epd": "EPD", "entrance_pupil_z": "entrance pupil z (from surface 1)",
+              "exit_pupil_z": "exit pupil z (from surface 1)", "exit_pupil_diameter": "exit pupil diameter",
               "fnumber": "f-number (EFL/EPD)", "working_fnumber": "working f-number",
               "paraxial_image_height": "paraxial image height", "total_track": "total track"}
     for key, label in labels.items():
@@ -177,8 +177,8 @@ def _render_field(r: dict[str, Any], *, wide: bool = False) -> None:
     full = r["aim"] == "full"
     ref = f"{r['reference_nm']:g} nm"
     limit = 1e3 * AIM_NOTE_FRACTION * r["stop_radius_mm"] if full else 0.0
-    main = [("field °", "right"), ("distortion\n%", "right"), ("rel. illum.\n3 rays (S51)", "right"),
-            ("rel. illum.\nall rays (S52)", "right")]
+    main = [("field °", "right"), ("distortion\n%", "right"), ("rel. illum.\n3 rays", "right"),
+            ("rel. illum.\nall rays", "right")]
     pupil = [("vignetting\ninferior (V_i)", "right"), ("vignetting\nsuperior (V_s)", "right"),
              ("vignetting\nlateral (V_l)", "right")] + ([("stop miss\nµm", "right")] if full else [])
     shown = any(any(f["vignetting"][k] for k in ("inferior", "superior", "lateral")) for f in r["fields"]) or full

@@ -205,7 +205,8 @@ def make_plan(
         "distortion": _optional(forced, "distortion",
                                 f"real vs paraxial image height differ by up to {disp.max():.2f} px in the region"),
         "relative_illumination": _optional(forced, "relative_illumination",
-                                           f"relative illumination down to {ri.min():.3f} in the region (S52)"),
+                                           f"relative illumination (all rays) down to {ri.min():.3f} in the "
+                                           "region"),
         "noise": _optional(forced, "noise", "additive Gaussian noise, seeded"),
     }
     if eff["noise"]["on"]:

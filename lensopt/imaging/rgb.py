@@ -28,7 +28,7 @@ from lensopt.errors import LensoptError
 
 __all__ = ["rgb_weights_from_spectrum", "channel_extent_nm", "RULE"]
 
-RULE = ("derived from the spectrum by the seed's rule (S4.1.2): contiguous thirds of the spectrum, "
+RULE = ("derived from the spectrum by the seed's rule: contiguous thirds of the spectrum, "
         "shortest wavelengths → B, longest → R")
 
 

@@ -19,7 +19,7 @@ from lensopt.errors import LensoptError
 __all__ = ["Region", "Sensor", "parse_region", "REGION_HELP"]
 
 REGION_HELP = ("x0,y0,w,h in sensor pixels; or full | center | corner (1:1 crops of the image's size); "
-               "or tile:C,R/NCxNR (tile C,R of an NC×NR grid, seed S3.3.1)")
+               "or tile:C,R/NCxNR (tile C,R of an NC×NR grid)")
 
 
 @dataclass(frozen=True)

@@ -216,11 +216,13 @@ def test_aot_package_equals_eager_to_1e12_mm_with_every_failure_reason() -> None
     for he, hf in zip(eager.hits, fast.hits, strict=True):
         assert (he.pos - hf.pos)[ok].abs().max() < 1e-12 and (he.t - hf.t)[ok].abs().max() < 1e-12
         assert (he.dir_out - hf.dir_out)[ok].abs().max() < 1e-12
-    # On the image plane, 30 mm behind the last surface, these rays (up to 60° off axis) land up to
-    # ~200 mm from the axis, where a last-bit difference in the direction becomes a few 1e-12 mm: the
-    # bound there is 1e-12 mm per mm of height beyond 1 mm (1e-12 relative).
+    # On the image plane, 30 mm behind the last surface, the steepest of these rays land up to ~1,000 mm
+    # from the axis, where a last-bit difference in the direction becomes 1e-10 mm. The package runs the
+    # compiled trace's formulation (``trace_kernel``, issue 29: other roundings than the eager reference,
+    # as ``torch.compile``'s kernel), so the bound there is 2e-12 mm per mm of height beyond 1 mm (2e-12
+    # relative; measured 1.03e-12, a ray landing 1,054 mm out; directions agree to 4e-14).
     scale = eager.pos.abs().clamp_min(1.0)
-    assert ((eager.pos - fast.pos).abs() / scale)[ok].max() < 1e-12 and (eager.dir - fast.dir)[ok].abs().max() < 1e-12
+    assert ((eager.pos - fast.pos).abs() / scale)[ok].max() < 2e-12 and (eager.dir - fast.dir)[ok].abs().max() < 1e-12
     # A call that needs gradients never goes to a package (no autograd through it).
     assert choose_backend(lens, 10**6, record=True, grad=True) == "eager"
     assert choose_backend(lens, 10**6, record=True, grad=True, backend="compiled") == "compiled"

@@ -117,6 +117,6 @@ def test_simulate_cmount_without_rgb_weights(tmp_path: Path) -> None:
     assert r.exit_code == 0, r.output
     out = json.loads(r.stdout)
     assert (tmp_path / "out.png").is_file()
-    assert any("S4.1.2" in note for note in out["plan"]["notes"])
+    assert any("contiguous thirds of the spectrum" in note for note in out["plan"]["notes"])  # S4.1.2
     assert out["plan"]["channels"] == ["R", "G", "B"]
     assert 550.0 not in out["plan"]["wavelengths_nm"]  # its weight is 0: not traced
