@@ -128,7 +128,8 @@ def textured_leaves(
     phase = rng.uniform(0.0, 2 * math.pi, n)
     blurred = rng.random(n) < blur
     sigma = float(rng.uniform(0.6, 2.0))
-    gam = float(rng.uniform(*gamma)) if gamma is not None else 1.0
+    u_gamma = float(rng.random())  # drawn whatever ``gamma`` is: the other draws do not depend on it
+    gam = gamma[0] + u_gamma * (gamma[1] - gamma[0]) if gamma is not None else 1.0
     noise_seed = int(rng.integers(0, 2**62))
     # The background leaf: centred on the frame, the frame's half-diagonal as radius.
     radius = np.append(leaves.radius, 0.5 * math.hypot(height, width))
