@@ -92,10 +92,10 @@ def write_inputs(work: Path, a: argparse.Namespace) -> dict[str, Path]:
     return out
 
 
-def _run(cmd: list[str], log: Path) -> subprocess.Popen:
+def _run(cmd: list[str], log: Path, *, append: bool = False) -> subprocess.Popen:
     env = dict(os.environ, OMP_NUM_THREADS=str(1), PYTHONPATH=str(ROOT))
     print("$ " + " ".join(cmd), flush=True)
-    return subprocess.Popen(cmd, stdout=log.open("w"), stderr=subprocess.STDOUT, env=env, cwd=ROOT)
+    return subprocess.Popen(cmd, stdout=log.open("a" if append else "w"), stderr=subprocess.STDOUT, env=env, cwd=ROOT)
 
 
 def _wait(procs: list[tuple[str, subprocess.Popen, float]], times: dict[str, float]) -> None:
@@ -363,28 +363,35 @@ def transfer(work: Path, files: dict[str, Path], a: argparse.Namespace) -> None:
         procs = []
         for src in todo[k:k + a.parallel]:
             tag = "src_" + src.replace("+", "_")
-            for p in (work / f"ck_{tag}", work / f"tb_{tag}"):
-                shutil.rmtree(p, ignore_errors=True)
             cmd = _python() + ["train-irm", str(files["spot"]), "-o", str(work / f"ck_{tag}"), "--images", src,
                                "--seed", "0"] + _irm_opts(a)
-            procs.append((tag, _run(cmd, work / f"{tag}.log"), time.perf_counter()))
+            if (work / f"ck_{tag}").exists():  # an interrupted run: continued bit-identically
+                cmd.append("--resume")
+            procs.append((tag, _run(cmd, work / f"{tag}.log", append=True), time.perf_counter()))
         _wait(procs, times)
     cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     evals = {"photos": ["--images", "photos", "--count", "1000", "--seed", "0"],
              "dead_leaves": ["--count", str(a.eval_count), "--seed", str(EVAL_SEED)],
              "textured": ["--images", "textured", "--count", str(a.eval_count), "--seed", str(EVAL_SEED)]}
+    from concurrent.futures import ThreadPoolExecutor
+
+    jobs = {(src, key): _python() + ["evaluate", str(files["spot"]), "--irm",
+                                     str(work / f"ck_src_{src.replace('+', '_')}"), "--noise", "0.005", "--patch",
+                                     str(a.eval_patch), "--json"] + extra
+            for src in a.sources for key, extra in evals.items()}
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(a.parallel) as pool:  # a.parallel evaluate processes side by side
+        done = dict(zip(jobs, pool.map(_json_out, jobs.values()), strict=True))
+    eval_wall = time.perf_counter() - t0
     rows: dict[str, Any] = {}
     for src in a.sources:
         tag = "src_" + src.replace("+", "_")
         row: dict[str, Any] = {"checkpoint": f"ck_{tag}"}
-        t0 = time.perf_counter()
-        for key, extra in evals.items():
-            e = _json_out(_python() + ["evaluate", str(files["spot"]), "--irm", str(work / f"ck_{tag}"),
-                                       "--noise", "0.005", "--patch", str(a.eval_patch), "--json"] + extra)
+        for key in evals:
+            e = done[(src, key)]
             before, after = _brief(e), _brief(e["after_restoration"])
             row[key] = {"before": before, "after": after,
                         "after_minus_before": _items_diff(after["items_psnr_db"], before["items_psnr_db"])}
-        row["evaluate_wall_s"] = time.perf_counter() - t0
         from lensopt.checkpoint import load_checkpoint
 
         hist = load_checkpoint(work / f"ck_{tag}").meta.get("history") or []
@@ -402,7 +409,8 @@ def transfer(work: Path, files: dict[str, Path], a: argparse.Namespace) -> None:
                    "sampling": "rings:8", "grid": [3, 3], "seed": 0, "threads_per_process": 1},
         "evaluation": {"noise": 0.005, "patch": a.eval_patch, "dead_leaves_seed": EVAL_SEED,
                        "count_procedural": a.eval_count, "photos": "every tile of the held-out photographs"},
-        "train_wall_s": times, "train_cpu_s": (cpu1.ru_utime + cpu1.ru_stime) - (cpu0.ru_utime + cpu0.ru_stime),
+        "train_wall_s": times, "evaluate_wall_s": eval_wall, "parallel": a.parallel,
+        "train_cpu_s": (cpu1.ru_utime + cpu1.ru_stime) - (cpu0.ru_utime + cpu0.ru_stime),
         "evaluate_cpu_s": (cpu2.ru_utime + cpu2.ru_stime) - (cpu1.ru_utime + cpu1.ru_stime),
         "load_avg_at_end": os.getloadavg(), "rows": rows, "paired_against_first": vs}
     from lensopt.imaging.sources import PHOTOS_HELD_OUT, PHOTOS_TRAIN
@@ -432,7 +440,8 @@ def main() -> None:
     p.add_argument("--validate-every", type=int, default=50)
     p.add_argument("--checkpoint-every", type=int, default=25)
     p.add_argument("--eval-count", type=int, default=50, help="held-out dead-leaves scenes")
-    p.add_argument("--parallel", type=int, default=2, choices=(1, 2))
+    p.add_argument("--parallel", type=int, default=2, choices=(1, 2, 3, 4), help="processes side by side "
+                   "(Table S15: 1 or 2; --sources: up to 4)")
     p.add_argument("--work", type=Path, default=ROOT / "out" / "table_s15")
     p.add_argument("--skip-main", action="store_true",
                    help="skip the three main training runs (use those in --work)")

@@ -30,8 +30,8 @@ import torch
 from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 
-__all__ = ["DeadLeaves", "ImageFolder", "IMAGE_SUFFIXES", "Leaves", "dead_leaves", "leaf_geometry", "is_div2k", "center_crop", "random_crop_flip",
-           "sample_batch", "split_files"]
+__all__ = ["DeadLeaves", "ImageFolder", "IMAGE_SUFFIXES", "Leaves", "dead_leaves", "leaf_geometry", "is_div2k",
+           "center_crop", "random_crop_flip", "sample_batch", "split_files"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr")
 _DIV2K = {"train": ("train_HR", "DIV2K_train_HR"), "val": ("valid_HR", "DIV2K_valid_HR")}

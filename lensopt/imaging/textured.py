@@ -68,9 +68,11 @@ def _gaussian_blur(img: torch.Tensor, sigma: float) -> torch.Tensor:
     out = img[:, None]
     pad_w, pad_h = min(half, w - 1), min(half, h - 1)
     if pad_w > 0:
-        out = F.conv2d(F.pad(out, (pad_w, pad_w, 0, 0), mode="reflect"), k[half - pad_w:half + pad_w + 1].view(1, 1, 1, -1))
+        kw = k[half - pad_w:half + pad_w + 1].view(1, 1, 1, -1)
+        out = F.conv2d(F.pad(out, (pad_w, pad_w, 0, 0), mode="reflect"), kw)
     if pad_h > 0:
-        out = F.conv2d(F.pad(out, (0, 0, pad_h, pad_h), mode="reflect"), k[half - pad_h:half + pad_h + 1].view(1, 1, -1, 1))
+        kh = k[half - pad_h:half + pad_h + 1].view(1, 1, -1, 1)
+        out = F.conv2d(F.pad(out, (0, 0, pad_h, pad_h), mode="reflect"), kh)
     return out[:, 0]
 
 
@@ -145,7 +147,8 @@ def textured_leaves(
     xx = torch.arange(width, device=device, dtype=dtype)[None, :] + 0.5
     dx, dy = xx - per_leaf(cx)[idx], yy - per_leaf(cy)[idx]
     r = per_leaf(radius)[idx]
-    shade = 1.0 + per_leaf(grad)[idx] * (dx * per_leaf(np.cos(grad_dir))[idx] + dy * per_leaf(np.sin(grad_dir))[idx]) / r
+    across = dx * per_leaf(np.cos(grad_dir))[idx] + dy * per_leaf(np.sin(grad_dir))[idx]
+    shade = 1.0 + per_leaf(grad)[idx] * across / r
     fields = pink_noise(_FIELDS, height, width, torch.Generator().manual_seed(noise_seed), device=device, dtype=dtype)
     tex = fields.view(_FIELDS, -1).gather(0, per_leaf(tex_field).long()[idx].view(1, -1)).view(height, width)
     along = dx * per_leaf(np.cos(grating_dir))[idx] + dy * per_leaf(np.sin(grating_dir))[idx]

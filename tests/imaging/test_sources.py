@@ -10,8 +10,15 @@ import torch
 from lensopt.errors import LensoptError
 from lensopt.imaging.datasets import DeadLeaves, ImageFolder
 from lensopt.imaging.evaluate import scene_source
-from lensopt.imaging.sources import (PHOTOS_HELD_OUT, PHOTOS_TRAIN, Mixture, PhotoCrops, photo_dir, photo_tiles,
-                                     training_sources)
+from lensopt.imaging.sources import (
+    PHOTOS_HELD_OUT,
+    PHOTOS_TRAIN,
+    Mixture,
+    PhotoCrops,
+    photo_dir,
+    photo_tiles,
+    training_sources,
+)
 from lensopt.imaging.textured import TexturedLeaves
 
 
