@@ -14,8 +14,10 @@ The spot lens JSON carries no ``rgb_weights``; its copy here gets the restored s
 R/G/B split, which does not touch the geometry) so that all three networks restore 3-channel images.
 
 Evaluation: ``lensopt evaluate LENS --irm CKPT --noise 0.005 --json`` (before and after restoration) on
-held-out dead-leaves scenes of a seed used by no training source, and on the colour photographs
-bundled with scikit-image; ESR from ``lensopt trace LENS --json`` (rings:24).
+held-out dead-leaves scenes of a seed used by no training source, and on the held-out photographs
+(``evaluate --images photos --patch 128``: every 128² tile of astronaut, chelsea and coffee, which no
+training source draws; until 2026-11-28 the central 256² crops of 8 scikit-image photographs); ESR
+from ``lensopt trace LENS --json`` (rings:24).
 
     PYTHONPATH=. python benchmarks/e2e/table_s15.py --steps 500 --batch 4 --patch 64 --control --extra-seeds 1
     # → out/table_s15/ (lenses, checkpoints, logs) and benchmarks/e2e/results_table_s15.json
@@ -51,8 +53,6 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[2]
-PHOTOS = ["astronaut.png", "chelsea.png", "coffee.png", "rocket.jpg", "motorcycle_left.png",
-          "hubble_deep_field.jpg", "ihc.png", "retina.jpg"]
 EVAL_SEED = 424242  # dead-leaves seed of the held-out scenes: training uses seeds 0 and 1 000 003
 
 
@@ -305,12 +305,6 @@ def requirements(lens: Path) -> dict[str, Any]:
 
 
 def evaluate(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str, Any]:
-    import skimage
-
-    photos = work / "photos"
-    photos.mkdir(exist_ok=True)
-    for name in PHOTOS:
-        shutil.copy(Path(skimage.__file__).parent / "data" / name, photos / name)
     rows: dict[str, Any] = {}
     todo = [("spot", files["spot"], "ck_spot"), ("raw", files["raw"], "ck_raw"),
             ("restored", work / "restored.json", "ck_restored")]
@@ -334,7 +328,8 @@ def evaluate(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[
         row["esr_um"] = tr["effective_spot_radius_um"]
         row["requirements"] = requirements(lens)
         for key, extra in (("dead_leaves", ["--count", str(a.eval_count), "--seed", str(EVAL_SEED)]),
-                           ("photos", ["--images", str(photos), "--count", "8", "--seed", "0"])):
+                           ("photos", ["--images", "photos", "--patch", str(a.eval_patch), "--count", "1000",
+                                       "--seed", "0"])):
             e = _json_out(_python() + ["evaluate", str(lens), "--irm", str(work / ck), "--noise", "0.005",
                                        "--json"] + extra)
             row[key] = {"before": _brief(e), "after": _brief(e["after_restoration"]),
@@ -461,7 +456,8 @@ def main() -> None:
                    help="keep the rows already in --out (same --work) and evaluate only the missing ones")
     p.add_argument("--sources", nargs="*", default=[],
                    help="the transfer study instead: train-irm --images SOURCE for the spot lens, per source")
-    p.add_argument("--eval-patch", type=int, default=128, help="evaluation patch of --sources")
+    p.add_argument("--eval-patch", type=int, default=128, help="patch of the held-out photograph tiles (and of "
+                   "every --sources evaluation)")
     p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "e2e" / "results_table_s15.json")
     a = p.parse_args()
     a.reused_rows = json.loads(a.out.read_text())["rows"] if a.reuse_rows and a.out.exists() else {}
@@ -489,7 +485,7 @@ def main() -> None:
         "train_wall_s": times, "train_total_wall_s": t_train if not a.skip_main else None,
         "children_cpu_s": cpu.ru_utime + cpu.ru_stime, "load_avg_at_end": os.getloadavg(),
         "evaluation": {"noise": 0.005, "dead_leaves_seed": EVAL_SEED, "dead_leaves_count": a.eval_count,
-                       "photos": PHOTOS},
+                       "photos": f"every {a.eval_patch}² tile of the held-out photographs (--images photos)"},
         "rows": rows,
         "paired_differences": {f"{key}/{when}/{y}-{x}": paired(rows, key, when, x, y)
                                for key in ("dead_leaves", "photos") for when in ("before", "after")
