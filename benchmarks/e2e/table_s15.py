@@ -14,8 +14,10 @@ The spot lens JSON carries no ``rgb_weights``; its copy here gets the restored s
 R/G/B split, which does not touch the geometry) so that all three networks restore 3-channel images.
 
 Evaluation: ``lensopt evaluate LENS --irm CKPT --noise 0.005 --json`` (before and after restoration) on
-held-out dead-leaves scenes of a seed used by no training source, and on the colour photographs
-bundled with scikit-image; ESR from ``lensopt trace LENS --json`` (rings:24).
+held-out dead-leaves scenes of a seed used by no training source, and on the held-out photographs
+(``evaluate --images photos --patch 128``: every 128² tile of astronaut, chelsea and coffee, which no
+training source draws; until 2026-11-28 the central 256² crops of 8 scikit-image photographs); ESR
+from ``lensopt trace LENS --json`` (rings:24).
 
     PYTHONPATH=. python benchmarks/e2e/table_s15.py --steps 500 --batch 4 --patch 64 --control --extra-seeds 1
     # → out/table_s15/ (lenses, checkpoints, logs) and benchmarks/e2e/results_table_s15.json
@@ -25,6 +27,16 @@ one thread each). ``--skip-main`` re-uses the three main runs of an earlier call
 control runs are re-used whenever their checkpoint has reached ``--steps``).
 ``--control`` adds a fourth row: the restored lens with a fresh ``train-irm`` network of the same
 budget (is the gain the lens's or the joint training's?).
+
+``--sources procedural textured photos textured+photos`` runs instead the transfer study of issue 27: the
+spot lens's network trained by ``train-irm --images SOURCE`` (same steps, batch, patch, seed for every
+source), each scored by ``evaluate --irm --noise 0.005 --patch 128`` on the held-out photographs (every
+128² tile of astronaut, chelsea, coffee: ``evaluate --images photos``, never drawn in training), on
+held-out dead leaves and on held-out textured dead leaves (seed 424242); written to the key
+``scenes_transfer`` of ``--out`` (the Table S15 rows there are kept, and a Table S15 run keeps it).
+
+    PYTHONPATH=. python benchmarks/e2e/table_s15.py --steps 500 --batch 4 --patch 64 \
+        --sources procedural textured photos textured+photos --work out/scenes_transfer
 """
 
 from __future__ import annotations
@@ -41,8 +53,6 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[2]
-PHOTOS = ["astronaut.png", "chelsea.png", "coffee.png", "rocket.jpg", "motorcycle_left.png",
-          "hubble_deep_field.jpg", "ihc.png", "retina.jpg"]
 EVAL_SEED = 424242  # dead-leaves seed of the held-out scenes: training uses seeds 0 and 1 000 003
 
 
@@ -82,10 +92,10 @@ def write_inputs(work: Path, a: argparse.Namespace) -> dict[str, Path]:
     return out
 
 
-def _run(cmd: list[str], log: Path) -> subprocess.Popen:
+def _run(cmd: list[str], log: Path, *, append: bool = False) -> subprocess.Popen:
     env = dict(os.environ, OMP_NUM_THREADS=str(1), PYTHONPATH=str(ROOT))
     print("$ " + " ".join(cmd), flush=True)
-    return subprocess.Popen(cmd, stdout=log.open("w"), stderr=subprocess.STDOUT, env=env, cwd=ROOT)
+    return subprocess.Popen(cmd, stdout=log.open("a" if append else "w"), stderr=subprocess.STDOUT, env=env, cwd=ROOT)
 
 
 def _wait(procs: list[tuple[str, subprocess.Popen, float]], times: dict[str, float]) -> None:
@@ -295,12 +305,6 @@ def requirements(lens: Path) -> dict[str, Any]:
 
 
 def evaluate(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[str, Any]:
-    import skimage
-
-    photos = work / "photos"
-    photos.mkdir(exist_ok=True)
-    for name in PHOTOS:
-        shutil.copy(Path(skimage.__file__).parent / "data" / name, photos / name)
     rows: dict[str, Any] = {}
     todo = [("spot", files["spot"], "ck_spot"), ("raw", files["raw"], "ck_raw"),
             ("restored", work / "restored.json", "ck_restored")]
@@ -324,13 +328,101 @@ def evaluate(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[
         row["esr_um"] = tr["effective_spot_radius_um"]
         row["requirements"] = requirements(lens)
         for key, extra in (("dead_leaves", ["--count", str(a.eval_count), "--seed", str(EVAL_SEED)]),
-                           ("photos", ["--images", str(photos), "--count", "8", "--seed", "0"])):
+                           ("photos", ["--images", "photos", "--patch", str(a.eval_patch), "--count", "1000",
+                                       "--seed", "0"])):
             e = _json_out(_python() + ["evaluate", str(lens), "--irm", str(work / ck), "--noise", "0.005",
                                        "--json"] + extra)
             row[key] = {"before": _brief(e), "after": _brief(e["after_restoration"]),
                         "gain_db": e["after_restoration"]["psnr_db"] - e["psnr_db"]}
         rows[name] = row
     return rows
+
+
+def _items_diff(after: list[float], before: list[float]) -> dict[str, float]:
+    import statistics
+
+    d = [y - x for x, y in zip(before, after, strict=True)]
+    se = statistics.stdev(d) / len(d) ** 0.5 if len(d) > 1 else float("nan")
+    return {"mean_db": statistics.fmean(d), "stderr_db": se, "scenes": len(d), "wins": sum(x > 0 for x in d)}
+
+
+def transfer(work: Path, files: dict[str, Path], a: argparse.Namespace) -> None:
+    """Issue 27's transfer study (see the module doc): one network per training source, scored on held-out
+    photographs, dead leaves and textured dead leaves; CPU seconds of every child process."""
+    from lensopt.files import write_text_atomic
+
+    cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    times: dict[str, float] = {}
+    todo = [s for s in a.sources if not _finished(work / f"ck_src_{s.replace('+', '_')}", a.steps)]
+    for k in range(0, len(todo), a.parallel):  # a.parallel runs side by side, one thread each
+        procs = []
+        for src in todo[k:k + a.parallel]:
+            tag = "src_" + src.replace("+", "_")
+            cmd = _python() + ["train-irm", str(files["spot"]), "-o", str(work / f"ck_{tag}"), "--images", src,
+                               "--seed", "0"] + _irm_opts(a)
+            if (work / f"ck_{tag}").exists():  # an interrupted run: continued bit-identically
+                cmd.append("--resume")
+            procs.append((tag, _run(cmd, work / f"{tag}.log", append=True), time.perf_counter()))
+        _wait(procs, times)
+    cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    evals = {"photos": ["--images", "photos", "--count", "1000", "--seed", "0"],
+             "dead_leaves": ["--count", str(a.eval_count), "--seed", str(EVAL_SEED)],
+             "textured": ["--images", "textured", "--count", str(a.eval_count), "--seed", str(EVAL_SEED)]}
+    from concurrent.futures import ThreadPoolExecutor
+
+    jobs = {(src, key): _python() + ["evaluate", str(files["spot"]), "--irm",
+                                     str(work / f"ck_src_{src.replace('+', '_')}"), "--noise", "0.005", "--patch",
+                                     str(a.eval_patch), "--json"] + extra
+            for src in a.sources for key, extra in evals.items()}
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(a.parallel) as pool:  # a.parallel evaluate processes side by side
+        done = dict(zip(jobs, pool.map(_json_out, jobs.values()), strict=True))
+    eval_wall = time.perf_counter() - t0
+    rows: dict[str, Any] = {}
+    for src in a.sources:
+        tag = "src_" + src.replace("+", "_")
+        row: dict[str, Any] = {"checkpoint": f"ck_{tag}"}
+        for key in evals:
+            e = done[(src, key)]
+            before, after = _brief(e), _brief(e["after_restoration"])
+            row[key] = {"before": before, "after": after,
+                        "after_minus_before": _items_diff(after["items_psnr_db"], before["items_psnr_db"])}
+        from lensopt.checkpoint import load_checkpoint
+
+        hist = load_checkpoint(work / f"ck_{tag}").meta.get("history") or []
+        row["train_sum_step_wall_s"] = sum(h.get("wall_s", 0.0) for h in hist)
+        row["train_last_validation"] = next((h for h in reversed(hist) if "psnr_restored" in h), None)
+        rows[src] = row
+    cpu2 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    first = a.sources[0]
+    vs = {f"{key}/after/{src}-{first}": _items_diff(rows[src][key]["after"]["items_psnr_db"],
+                                                   rows[first][key]["after"]["items_psnr_db"])
+          for src in a.sources[1:] for key in evals}
+    section = {
+        "date": time.strftime("%Y-%m-%d"), "lens": "lenses/cmount_4p.json with the restored spec's rgb_weights",
+        "budget": {"steps": a.steps, "batch": a.batch, "patch": a.patch, "psf_size": a.psf_size, "fields": 9,
+                   "sampling": "rings:8", "grid": [3, 3], "seed": 0, "threads_per_process": 1},
+        "evaluation": {"noise": 0.005, "patch": a.eval_patch, "dead_leaves_seed": EVAL_SEED,
+                       "count_procedural": a.eval_count, "photos": "every tile of the held-out photographs"},
+        "train_wall_s": times, "evaluate_wall_s": eval_wall, "parallel": a.parallel,
+        "train_cpu_s": (cpu1.ru_utime + cpu1.ru_stime) - (cpu0.ru_utime + cpu0.ru_stime),
+        "evaluate_cpu_s": (cpu2.ru_utime + cpu2.ru_stime) - (cpu1.ru_utime + cpu1.ru_stime),
+        "load_avg_at_end": os.getloadavg(), "rows": rows, "paired_against_first": vs}
+    from lensopt.imaging.sources import PHOTOS_HELD_OUT, PHOTOS_TRAIN
+
+    section["photos_train"], section["photos_held_out"] = list(PHOTOS_TRAIN), list(PHOTOS_HELD_OUT)
+    result = json.loads(a.out.read_text()) if a.out.exists() else {}
+    result["scenes_transfer"] = section
+    write_text_atomic(a.out, json.dumps(result, indent=1) + "\n")
+    print("| training scenes | photos before → after (Δ ± se) | dead leaves before → after | textured before → after |")
+    print("|---|---|---|---|")
+    for src, r in rows.items():
+        cells = []
+        for key in evals:
+            d = r[key]["after_minus_before"]
+            cells.append(f"{r[key]['before']['psnr_db']:.2f} → {r[key]['after']['psnr_db']:.2f} "
+                         f"({d['mean_db']:+.2f} ± {d['stderr_db']:.2f})")
+        print(f"| {src} | " + " | ".join(cells) + " |")
 
 
 def main() -> None:
@@ -343,7 +435,8 @@ def main() -> None:
     p.add_argument("--validate-every", type=int, default=50)
     p.add_argument("--checkpoint-every", type=int, default=25)
     p.add_argument("--eval-count", type=int, default=50, help="held-out dead-leaves scenes")
-    p.add_argument("--parallel", type=int, default=2, choices=(1, 2))
+    p.add_argument("--parallel", type=int, default=2, choices=(1, 2, 3, 4), help="processes side by side "
+                   "(Table S15: 1 or 2; --sources: up to 4)")
     p.add_argument("--work", type=Path, default=ROOT / "out" / "table_s15")
     p.add_argument("--skip-main", action="store_true",
                    help="skip the three main training runs (use those in --work)")
@@ -361,11 +454,17 @@ def main() -> None:
                    metavar=("WEIGHT", "MAX_PERCENT"), help="the distortion constraint of the polish")
     p.add_argument("--reuse-rows", action="store_true",
                    help="keep the rows already in --out (same --work) and evaluate only the missing ones")
+    p.add_argument("--sources", nargs="*", default=[],
+                   help="the transfer study instead: train-irm --images SOURCE for the spot lens, per source")
+    p.add_argument("--eval-patch", type=int, default=128, help="patch of the held-out photograph tiles (and of "
+                   "every --sources evaluation)")
     p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "e2e" / "results_table_s15.json")
     a = p.parse_args()
     a.reused_rows = json.loads(a.out.read_text())["rows"] if a.reuse_rows and a.out.exists() else {}
     a.work.mkdir(parents=True, exist_ok=True)
     files = write_inputs(a.work, a)
+    if a.sources:
+        return transfer(a.work, files, a)
     t0 = time.perf_counter()
     times = {} if a.skip_main else train(a.work, files, a)
     t_train = time.perf_counter() - t0
@@ -386,7 +485,7 @@ def main() -> None:
         "train_wall_s": times, "train_total_wall_s": t_train if not a.skip_main else None,
         "children_cpu_s": cpu.ru_utime + cpu.ru_stime, "load_avg_at_end": os.getloadavg(),
         "evaluation": {"noise": 0.005, "dead_leaves_seed": EVAL_SEED, "dead_leaves_count": a.eval_count,
-                       "photos": PHOTOS},
+                       "photos": f"every {a.eval_patch}² tile of the held-out photographs (--images photos)"},
         "rows": rows,
         "paired_differences": {f"{key}/{when}/{y}-{x}": paired(rows, key, when, x, y)
                                for key in ("dead_leaves", "photos") for when in ("before", "after")
@@ -413,6 +512,8 @@ def main() -> None:
             "validation": [{k: h[k] for k in ("step", "psnr_raw", "psnr_restored") if k in h}
                            for h in hist if "psnr_restored" in h],
             "history_every_10th_step": [h for h in hist if h["step"] % 10 == 0]}
+    if a.out.exists() and "scenes_transfer" in (old := json.loads(a.out.read_text())):
+        result["scenes_transfer"] = old["scenes_transfer"]
     write_text_atomic(a.out, json.dumps(result, indent=1) + "\n")
     print("| lens | ESR µm | dead leaves before → after (gain) | photos before → after (gain) |")
     print("|---|---:|---|---|")

@@ -29,8 +29,10 @@ commands = typer.Typer()  # its commands, put in order by lensopt.cli.app
 def train_irm_cmd(
     lens: LensArg,
     output: Annotated[Path, typer.Option("--output", "-o", help="Checkpoint folder to write.")],
-    images: Annotated[str, typer.Option("--images", help="Image folder (DIV2K layout or a hash split), or "
-                                        "'procedural' (dead-leaves scenes).")] = "procedural",
+    images: Annotated[str, typer.Option("--images", help="Training scenes: procedural (dead leaves) | textured "
+                                        "(textured dead leaves) | photos (crops of the bundled training "
+                                        "photographs) | an image folder (DIV2K layout or a hash split); mix "
+                                        "with '+', e.g. textured+photos.")] = "procedural",
     steps: Annotated[int | None, typer.Option("--steps", min=1, help="Steps (default: [restore.train]).")] = None,
     batch: Annotated[int | None, typer.Option("--batch", min=1, help="Patches per step.")] = None,
     patch: Annotated[int | None, typer.Option("--patch", min=16, help="Patch side, pixels.")] = None,
@@ -178,15 +180,11 @@ def parse_grid_text(text: str, option: str) -> tuple[int, int]:
 
 
 def data_sources(images: str, patch: int, seed: int, *, engine: Any = None) -> tuple[Any, Any, str]:
-    """(training source, held-out source, description) for ``--images DIR|procedural``; ``engine``: the
-    memory budget of every image read."""
-    from lensopt.imaging.datasets import DeadLeaves, ImageFolder
+    """(training source, held-out source, description) for ``--images`` (``imaging.sources``); ``engine``:
+    the memory budget of every image read."""
+    from lensopt.imaging.sources import training_sources
 
-    if images == "procedural":
-        return DeadLeaves(seed=seed), DeadLeaves(seed=seed + 1_000_003), "procedural"
-    train = ImageFolder(images, split="train", patch=patch, option="--images", engine=engine)
-    val = ImageFolder(images, split="val", patch=patch, option="--images", engine=engine)
-    return train, val, str(Path(images).resolve())
+    return training_sources(images, patch, seed, engine=engine, option="--images")
 
 
 def optimize_restored(start_spec: Any, output: Path, *, steps: int | None, seed: int, checkpoint: Path | None,

@@ -230,8 +230,10 @@ def render_run(r: dict[str, Any]) -> None:
 @handle_errors
 def evaluate(
     lens: LensArg,
-    images: Annotated[Path | None, typer.Option("--images", help="Folder of PNG/JPEG/TIFF/EXR images (DIV2K: "
-                                                "its valid_HR/); default: procedural dead-leaves scenes.")] = None,
+    images: Annotated[str | None, typer.Option("--images", help="Folder of PNG/JPEG/TIFF/EXR images (DIV2K: "
+                                               "its valid_HR/), or photos (tiles of the held-out bundled "
+                                               "photographs), textured (textured dead leaves); default: "
+                                               "procedural dead-leaves scenes.")] = None,
     count: Annotated[int, typer.Option("--count", help="Number of scenes (images: the first N by name).")] = 100,
     patch: Annotated[int, typer.Option("--patch", help="Central crop and sensor tile size, pixels.")] = 256,
     rays: Annotated[str, typer.Option("--rays", help="Pupil sampling per PSF (rings:N = 2N² rays).")] = "rings:32",

@@ -14,6 +14,8 @@
     render.py     differentiable training batches (S1.5, S3.3.1)
     regions.py    sensor tiles and stratified draws (S3.3.1)
     datasets.py   dead-leaves scenes and image folders
+    textured.py   textured dead leaves (photograph-like statistics), the power-spectrum slope
+    sources.py    named scene sources (procedural, textured, photos, '+' mixtures), the bundled photographs
     evaluate.py   PSNR/SSIM of simulated captures (S4.3.1)
     metrics.py    PSNR and SSIM
     io.py         image files (OpenImageIO), colour encodings

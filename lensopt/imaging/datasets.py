@@ -22,6 +22,7 @@ import math
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -29,8 +30,8 @@ import torch
 from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 
-__all__ = ["DeadLeaves", "ImageFolder", "IMAGE_SUFFIXES", "dead_leaves", "is_div2k", "center_crop", "random_crop_flip",
-           "sample_batch", "split_files"]
+__all__ = ["DeadLeaves", "ImageFolder", "IMAGE_SUFFIXES", "Leaves", "dead_leaves", "leaf_geometry", "is_div2k",
+           "center_crop", "random_crop_flip", "sample_batch", "split_files"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr")
 _DIV2K = {"train": ("train_HR", "DIV2K_train_HR"), "val": ("valid_HR", "DIV2K_valid_HR")}
@@ -67,10 +68,35 @@ def dead_leaves(
 
     Disks are painted back to front (later disks occlude earlier ones); pixel centres are point-sampled.
     """
+    rng, leaves = leaf_geometry(height, width, seed=seed, r_min=r_min, r_max=r_max, coverage=coverage,
+                                max_disks=max_disks)
+    n = leaves.count
+    colour = _srgb_to_linear(rng.random((n + 1, channels)))
+    img = torch.from_numpy(colour)[leaves.index]  # [H, W, C]
+    return img.permute(2, 0, 1).to(device=device, dtype=dtype).contiguous()
+
+
+@dataclass(frozen=True)
+class Leaves:
+    """The disks of a dead-leaves scene, in pixels (``count`` disks; leaf ``count`` is the background)."""
+
+    radius: np.ndarray
+    cx: np.ndarray
+    cy: np.ndarray
+    index: torch.Tensor  # [H, W] int64: the leaf seen at each pixel centre, in 0…count (count: background)
+
+    @property
+    def count(self) -> int:
+        return int(self.radius.size)
+
+
+def leaf_geometry(height: int, width: int, *, seed: int, r_min: float, r_max: float, coverage: float,
+                  max_disks: int, path: str = "dead_leaves") -> tuple[np.random.Generator, Leaves]:
+    """The disks of ``dead_leaves`` (its documented draws, in order) and the generator after them."""
     if height < 1 or width < 1:
-        raise LensoptError("scene size must be positive", path="dead_leaves", got=(height, width))
+        raise LensoptError("scene size must be positive", path=path, got=(height, width))
     if not 0 < r_min < r_max:
-        raise LensoptError("need 0 < r_min < r_max", path="dead_leaves", got=(r_min, r_max))
+        raise LensoptError("need 0 < r_min < r_max", path=path, got=(r_min, r_max))
     rng = np.random.default_rng(int(seed))
     side = min(height, width)
     aspect_w, aspect_h = width / side, height / side
@@ -83,10 +109,8 @@ def dead_leaves(
     radius = (r_min**-2 - u * (r_min**-2 - r_max**-2)) ** -0.5
     cx = rng.uniform(-r_max, aspect_w + r_max, n)
     cy = rng.uniform(-r_max, aspect_h + r_max, n)
-    colour = _srgb_to_linear(rng.random((n + 1, channels)))
     top = _paint_order(radius * side, cx * side, cy * side, height, width)
-    img = torch.from_numpy(colour)[torch.where(top < 0, n, top)]  # [H, W, C]; -1: the background leaf
-    return img.permute(2, 0, 1).to(device=device, dtype=dtype).contiguous()
+    return rng, Leaves(radius * side, cx * side, cy * side, torch.where(top < 0, n, top))
 
 
 def _paint_order(r: np.ndarray, x: np.ndarray, y: np.ndarray, height: int, width: int) -> torch.Tensor:
@@ -319,7 +343,7 @@ class ImageFolder:
 
 
 def sample_batch(
-    source: DeadLeaves | ImageFolder,
+    source: Any,
     batch: int,
     patch: int | tuple[int, int],
     generator: torch.Generator,
@@ -327,7 +351,8 @@ def sample_batch(
     device: torch.device | str | None = None,
     dtype: torch.dtype = torch.float32,
 ) -> torch.Tensor:
-    """``[batch, C, H, W]`` patches from ``source`` (random scenes/crops/flips drawn from ``generator``)."""
+    """``[batch, C, H, W]`` patches from ``source`` (anything with ``random_patch(patch, generator)``: random
+    scenes/crops/flips drawn from ``generator``)."""
     if batch < 1:
         raise LensoptError("batch size must be positive", path="batch", got=batch)
     patches = [source.random_patch(patch, generator) for _ in range(batch)]

@@ -34,6 +34,8 @@ from lensopt.imaging.metrics import psnr, ssim
 from lensopt.imaging.plan import Effects, PlanOptions
 from lensopt.imaging.regions import ring_of, stratified_draw, tile_grid
 from lensopt.imaging.simulate import PsfCache, plan_scene, run_plan, sensor_of
+from lensopt.imaging.sources import PHOTOS_HELD_OUT, photo_tiles
+from lensopt.imaging.textured import TexturedLeaves
 
 __all__ = ["EvalItem", "Evaluation", "evaluate", "scene_source"]
 
@@ -84,15 +86,27 @@ def scene_source(images: str | Path | None, *, count: int, patch: int, seed: int
                  option: str = "--images", engine: Engine | None = None) -> tuple[SceneFn, list[str], str]:
     """The scenes to evaluate: ``(scene(k) -> [3, patch, patch] linear float32, names, description)``.
 
-    ``images``: a folder (all its images, or ``valid_HR/`` of a DIV2K layout; the first ``count`` in name
-    order, central crops) or None (``count`` dead-leaves scenes of seed ``seed``).
+    ``images``: None or ``procedural`` (``count`` dead-leaves scenes of seed ``seed``), ``textured``
+    (``count`` textured dead-leaves scenes of seed ``seed``), ``photos`` (the held-out photographs of
+    ``imaging.sources``, every non-overlapping ``patch``² tile, the first ``count``), or a folder (all its
+    images, or ``valid_HR/`` of a DIV2K layout; the first ``count`` in name order, central crops).
     """
     if count < 1:
         raise LensoptError("must be at least 1", path="--count", got=count)
-    if images is None:
+    name = None if images is None else str(images)
+    if name in (None, "procedural"):
         src = DeadLeaves(seed=seed)
         names = [f"dead-leaves:{seed}:{k}" for k in range(count)]
         return (lambda k: src.scene(k, patch, patch)), names, f"{count} dead-leaves scenes (seed {seed})"
+    if name == "textured":
+        tex = TexturedLeaves(seed=seed)
+        names = [f"textured-leaves:{seed}:{k}" for k in range(count)]
+        return (lambda k: tex.scene(k, patch, patch)), names, f"{count} textured dead-leaves scenes (seed {seed})"
+    if name == "photos":
+        loaders, names = photo_tiles(patch, engine=engine, option=option)
+        loaders, names = loaders[:count], names[:count]
+        return (lambda k: loaders[k]()), names, (f"{len(names)} {patch}² tiles of the held-out photographs "
+                                                 f"({', '.join(PHOTOS_HELD_OUT)})")
     folder = ImageFolder(images, split="val" if is_div2k(images) else "all", patch=patch, option=option,
                          cache=0, engine=engine)
     n = min(count, len(folder))

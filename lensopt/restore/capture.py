@@ -15,19 +15,20 @@ from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.imaging.camera import Camera
 from lensopt.imaging.convolve import overlap_add_convolve
-from lensopt.imaging.datasets import DeadLeaves, ImageFolder, sample_batch
+from lensopt.imaging.datasets import sample_batch
 from lensopt.imaging.plan import lens_colour
 from lensopt.imaging.psf_grid import build_psf_grid, cell_centers_mm, field_weights
 from lensopt.imaging.regions import TileGrid, stratified_draw, tile_grid
 from lensopt.imaging.render import RenderSettings, psfs_from_spots, trace_spots
 from lensopt.imaging.scene import Region, Sensor
+from lensopt.imaging.sources import PatchSource
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.sampling import PupilSampling
 
 __all__ = ["ImagingSetup", "imaging_setup", "lens_psfs", "region_grids", "region_grids_for", "capture", "Source",
            "draw_batch", "GridCache", "ValidationSet", "validation_set"]
 
-Source = DeadLeaves | ImageFolder
+Source = PatchSource  # dead leaves, textured dead leaves, photographs, image folders, mixtures
 
 
 @dataclass(frozen=True)
