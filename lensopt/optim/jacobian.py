@@ -91,11 +91,12 @@ def tangent_leaves(primal: Any, tangent: Any) -> list[Tensor | None]:
 
 def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_of: Callable[[Lens], Launch],
                     terms_of: Callable[[Tensor, Lens, Bundle], Tensor],
-                    hit_fields: Callable[[Bundle], Collection[str]], system: System) -> tuple[Tensor, Tensor]:
+                    hit_fields: Callable[[Lens, Bundle], Collection[str]], system: System) -> tuple[Tensor, Tensor]:
     """(J (M, N), ℓ (M,)) at θ by stages A, B, C (module docstring), for the residual function
     θ ↦ ``terms_of(θ, lens, finish_bundle(system, launch, trace(lens, launch.rays, record=True)))`` with
-    ``lens = lens_of(θ)``, ``launch = launch_of(lens)``; ``hit_fields(bundle)``: the recorded hit fields
-    the terms read (``Term.reads``). The lens must have no placement (``optics.differential.supported``)."""
+    ``lens = lens_of(θ)``, ``launch = launch_of(lens)``; ``hit_fields(lens, bundle)``: the recorded hit
+    fields whose derivatives the terms read (``Term.reads``), at the primal lens and traced bundle (called
+    once, before ``terms_of``). The lens must have no placement (``optics.differential.supported``)."""
     holder: dict[str, Any] = {}
 
     def stage_a(t: Tensor) -> tuple[tuple[Tensor, ...], tuple[tuple[Tensor, ...], tuple[Tensor, ...]]]:
@@ -110,7 +111,7 @@ def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_
     lens_dot, start_dot = rebuild_a(list(dots_a), list(ot_a))
 
     def reads(result: RayTrace) -> Collection[str]:
-        return hit_fields(finish_bundle(system, start, result))
+        return hit_fields(lens, finish_bundle(system, start, result))
 
     result, result_dot = trace_with_tangents(lens, start.rays, lens_dot, start_dot.rays, hit_fields=reads)
     fl_b, ot_b, rebuild_b = split(result)

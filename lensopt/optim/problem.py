@@ -304,24 +304,44 @@ class Problem:
         lens, _ = self.lens(theta)
         return self._terms(theta, lens, self.bundle(lens))
 
-    def _terms(self, theta: Tensor, lens: Lens, bundle: Bundle) -> dict[str, Tensor]:
-        """The registered terms (``lensopt.optim.terms``), each times its static weight: spot terms
-        (TRA, distortion, illumination) from the spot sample; geometric constraints and failures from
-        every ray, the rim rays included."""
+    def _context(self, theta: Tensor, lens: Lens, bundle: Bundle) -> TermContext:
         spot = head(bundle, self.num_spot)
         stats = spot_stats(spot, self.system.wavelength_weights, self.field_weights)
-        ctx = TermContext(self.term_setup, theta, lens, bundle, spot, stats)
+        return TermContext(self.term_setup, theta, lens, bundle, spot, stats)
+
+    def _terms(self, theta: Tensor, lens: Lens, bundle: Bundle,
+               given: dict[str, Tensor] | None = None) -> dict[str, Tensor]:
+        """The registered terms (``lensopt.optim.terms``), each times its static weight: spot terms
+        (TRA, distortion, illumination) from the spot sample; geometric constraints and failures from
+        every ray, the rim rays included. ``given``: rows of terms already computed (by name)."""
+        ctx = self._context(theta, lens, bundle)
         out: dict[str, Tensor] = {}
         for t in TERMS:
             w = t.weight(self.term_setup)
             if w is None:
                 continue
-            out[t.name] = t.residual(ctx) * w
+            out[t.name] = given[t.name] if given and t.name in given else t.residual(ctx) * w
         return out
 
     def hit_fields(self, bundle: Bundle) -> set[str]:
         """The recorded hit fields whose derivatives the active terms read at ``bundle`` (``Term.reads``)."""
         return {f for t in TERMS if t.weight(self.term_setup) is not None for f in t.reads(bundle)}
+
+    def quiet_terms(self, theta: Tensor, lens: Lens, bundle: Bundle) -> tuple[dict[str, Tensor], set[str]]:
+        """(the rows of the active terms that are quiet at θ (``Term.quiet``: 0 with a zero derivative),
+        the hit fields the other terms read (``Term.reads``)), at the traced ``bundle`` of ``lens``."""
+        ctx = self._context(theta, lens, bundle)
+        quiet: dict[str, Tensor] = {}
+        fields: set[str] = set()
+        for t in TERMS:
+            w = t.weight(self.term_setup)
+            if w is None:
+                continue
+            if t.quiet(ctx):
+                quiet[t.name] = t.residual(ctx) * w
+            else:
+                fields.update(t.reads(bundle))
+        return quiet, fields
 
     def residuals(self, theta: Tensor) -> Tensor:
         """(M,) ℓ(θ): the one residual function (pure in θ)."""
@@ -332,12 +352,21 @@ class Problem:
         apply, else ``torch.func.jacfwd`` over the whole residual function (the same derivatives)."""
         if self.image is not None or not supported(self.setup.lens):
             return self.jacobian_jacfwd(theta)
+        # Terms whose rows are all inactive ramps at θ (``Term.quiet``) enter stage C as constants: their
+        # rows of J are exactly 0, and the trace's derivatives skip the hit fields only they read.
+        quiet: dict[str, Tensor] = {}
+
+        def hit_fields(lens: Lens, bundle: Bundle) -> set[str]:
+            rows, fields = self.quiet_terms(theta.detach(), lens, bundle)
+            quiet.update(rows)
+            return fields
+
         def terms_of(t: Tensor, lens: Lens, bundle: Bundle) -> Tensor:
-            return torch.cat(list(self._terms(t, lens, bundle).values()))
+            return torch.cat(list(self._terms(t, lens, bundle, quiet).values()))
 
         return staged_jacobian(theta, lens_of=lambda t: self.lens(t)[0],
                                launch_of=lambda lens: self.launch(lens, theta), terms_of=terms_of,
-                               hit_fields=self.hit_fields, system=self.system)
+                               hit_fields=hit_fields, system=self.system)
 
     def jacobian_jacfwd(self, theta: Tensor) -> tuple[Tensor, Tensor]:
         """(M, N) Jacobian by ``torch.func.jacfwd`` over ``residuals`` and ℓ(θ) (M,): the reference."""

@@ -103,6 +103,9 @@ class Term:
         config: setup ↦ the settings object of the term (its ``schedule`` is used), or None.
         reads: bundle ↦ the fields of the recorded hits (``SurfaceHit``) whose derivatives the
             residual needs at this bundle (``optim.jacobian`` computes only those); all by default.
+        quiet: context ↦ whether every row is an inactive ramp at this θ (0 with a zero derivative:
+            ``residuals.inactive``); the Jacobian then takes the rows' values without forward mode
+            and reads none of the term's hit fields. False by default.
     """
 
     name: str
@@ -111,6 +114,7 @@ class Term:
     residual: Callable[[TermContext], Tensor]
     config: Callable[[TermSetup], Any] = lambda s: None
     reads: Callable[[Bundle], Collection[str]] = lambda b: HIT_FIELDS
+    quiet: Callable[[TermContext], bool] = lambda c: False
 
 
 def _cons(name: str) -> Callable[[TermSetup], Any]:
@@ -151,6 +155,24 @@ def _nothing(bundle: Bundle) -> Collection[str]:
     return ()
 
 
+def _ray_path_quiet(c: TermContext) -> bool:
+    valid = c.bundle.result.valid
+    if not res.inactive(res.ray_path_margin(c.bundle, *c.setup.gap_bounds(c.lens)), valid):
+        return False
+    return res.inactive(res.ray_path_span_margin(c.bundle, list(c.setup.path_spans)), valid)
+
+
+def _ray_angle_quiet(c: TermContext) -> bool:
+    margin = res.ray_angle_margin(c.bundle, list(c.setup.interfaces), c.setup.settings.constraints.ray_angle.max_deg)
+    return res.inactive(margin, c.bundle.result.valid)
+
+
+def _surface_normal_quiet(c: TermContext) -> bool:
+    margin = res.surface_normal_margin(c.bundle, list(c.setup.refracting),
+                                       c.setup.settings.constraints.surface_normal.max_deg)
+    return res.inactive(margin, c.bundle.result.valid)
+
+
 TERMS: tuple[Term, ...] = (
     Term("tra", "transverse ray aberrations about the field centroids, ‖ℓ‖ = ESR (S37–S39)",
          lambda s: s.settings.tra.weight if s.objective == "spot" and s.settings.tra.weight > 0 else None,
@@ -166,14 +188,14 @@ TERMS: tuple[Term, ...] = (
     Term("image_loss", "√(2 L) of the image loss (scalar, for Adam)", _image_weight("scalar"),
          lambda c: c.setup.image.scalar(c.lens)),
     Term("ray_path", "axial ray path per gap (and per span of gaps) within its bounds (S41–S42)",
-         _cons_weight("ray_path"), _ray_path, _cons("ray_path"), lambda b: ("pos",)),
+         _cons_weight("ray_path"), _ray_path, _cons("ray_path"), lambda b: ("pos",), _ray_path_quiet),
     Term("ray_angle", "angles of incidence and refraction (S43–S45)", _cons_weight("ray_angle"),
          lambda c: res.ray_angle(c.bundle, list(c.setup.interfaces), c.setup.settings.constraints.ray_angle.max_deg),
-         _cons("ray_angle"), lambda b: ("cos2_in", "cos2_out")),
+         _cons("ray_angle"), lambda b: ("cos2_in", "cos2_out"), _ray_angle_quiet),
     Term("surface_normal", "surface normal angles where rays hit (S46–S47)", _cons_weight("surface_normal"),
          lambda c: res.surface_normal(c.bundle, list(c.setup.refracting),
                                       c.setup.settings.constraints.surface_normal.max_deg),
-         _cons("surface_normal"), lambda b: ("normal",)),
+         _cons("surface_normal"), lambda b: ("normal",), _surface_normal_quiet),
     Term("distortion", "distortion per field (S48–S50)", _cons_weight("distortion"),
          lambda c: res.distortion(c.lens, c.setup.system, c.spot, c.stats,
                                   c.setup.settings.constraints.distortion.max_percent / 100),

@@ -76,3 +76,46 @@ def test_reusing_the_aiming_solves_of_an_evaluation_changes_no_bit() -> None:
     assert p.solved_shape(theta) is not None and p.solved_shape(theta * (1 + 1e-15)) is None
     J1, r1 = p.jacobian(theta)
     assert torch.equal(J0, J1) and torch.equal(r0, r1)
+
+
+def test_quiet_terms_are_exact_zero_rows_and_active_ones_are_not_skipped() -> None:
+    # A term whose rows are all inactive ramps (margin < 0 on every valid ray) enters the staged
+    # Jacobian as constants: its rows must be jacfwd's exactly (zeros), its values ℓ's bit for bit.
+    # A tighter ray-angle limit makes some rows active: that term is then differentiated as before.
+    data = _study("cmount_4p.toml")
+    p = build_problem(parse_spec(data))
+    theta = p.theta0
+    lens, _ = p.lens(theta)
+    quiet, fields = p.quiet_terms(theta, lens, p.bundle(lens))
+    assert {"ray_path", "ray_angle"} <= set(quiet) and "tra" not in quiet
+    assert not {"cos2_in", "cos2_out", "pos"} & fields
+    ref, r_ref = p.jacobian_jacfwd(theta)
+    J, r = p.jacobian(theta)
+    assert torch.equal(r, r_ref)
+    for name in quiet:
+        assert torch.equal(J[p.slices[name]], torch.zeros_like(J[p.slices[name]]))
+        assert torch.equal(ref[p.slices[name]], J[p.slices[name]])
+    _assert_equal_by_group(p, J, ref)
+    data["optimize"]["constraints"]["ray_angle"]["max_deg"] = 20.0
+    p = build_problem(parse_spec(data))
+    lens, _ = p.lens(theta)
+    quiet, fields = p.quiet_terms(theta, lens, p.bundle(lens))
+    assert "ray_angle" not in quiet and {"cos2_in", "cos2_out"} <= fields
+    ref, r_ref = p.jacobian_jacfwd(theta)
+    J, r = p.jacobian(theta)
+    assert torch.equal(r, r_ref)
+    assert float(ref[p.slices["ray_angle"]].abs().max()) > 0
+    _assert_equal_by_group(p, J, ref)
+
+
+def test_a_ramp_at_exactly_zero_is_active() -> None:
+    # clamp_min's derivative passes at margin = 0: such a row is not quiet; failed rays do not count.
+    from lensopt.optim.residuals import inactive
+
+    valid = torch.tensor([True, True, False])
+    assert inactive(torch.tensor([-1.0, -1e-300, 5.0], dtype=torch.float64), valid)
+    assert not inactive(torch.tensor([-1.0, 0.0, 5.0], dtype=torch.float64), valid)
+    assert not inactive(torch.tensor([-1.0, -0.0, 5.0], dtype=torch.float64), valid)
+    x = torch.tensor([0.0, -1.0, -0.0], dtype=torch.float64)
+    _, dot = torch.func.jvp(lambda v: torch.clamp_min(v, 0.0), (x,), (torch.ones_like(x),))
+    assert dot.tolist() == [1.0, 0.0, 1.0]
