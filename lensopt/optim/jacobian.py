@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Collection
+from dataclasses import dataclass
 from typing import Any
 
 import torch
@@ -30,7 +31,82 @@ from lensopt.optics.differential import trace_with_tangents
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.trace import RayTrace
 
-__all__ = ["split", "tangent_leaves", "staged_jacobian"]
+__all__ = ["split", "tangent_leaves", "staged_jacobian", "RampRows", "RampPlan", "take_rays", "place_ramp_rows"]
+
+
+@dataclass(frozen=True)
+class RampRows:
+    """The active rows of one ramp term (``Term.margin``) at θ, differentiated apart from the rest.
+
+    Attributes:
+        name: the term (its block of ℓ: ``Problem.slices[name]``).
+        margin: (lens, bundle) ↦ (B, F, W, P) the term's margins.
+        weight: the term's static weight.
+        sqrt_n: √(F·W·P), the residual's divisor.
+        pick: (A,) the active rows among the margins of the selected rays (``RampPlan.rays``), flattened.
+        rows: (A,) the same rows in the term's block of ℓ.
+    """
+
+    name: str
+    margin: Callable[[Lens, Bundle], Tensor]
+    weight: float
+    sqrt_n: float
+    pick: Tensor
+    rows: Tensor
+
+
+@dataclass(frozen=True)
+class RampPlan:
+    """How the Jacobian takes the ramp terms at θ: ``given`` their rows of ℓ (constants in stage C: each
+    inactive row's derivative is exactly 0), ``ramps`` the active rows of each term that has any,
+    ``rays`` (K,) the rays (flat F·W·P index) those rows belong to, ``fields`` the recorded hit fields
+    whose derivatives the terms read (``Term.reads``; none for a term without an active row)."""
+
+    given: dict[str, Tensor]
+    ramps: tuple[RampRows, ...]
+    rays: Tensor | None
+    fields: frozenset[str]
+
+
+def take_rays(bundle: Bundle, rays: Tensor) -> Bundle:
+    """``bundle`` with its trace cut to the rays ``rays`` (K,) (flat F·W·P indices), batch (1, 1, K): what
+    the margins of ramp terms read (the hits and the end of the trace); the rest is ``bundle``'s."""
+    res = bundle.result
+    lead = res.status.shape
+    n = res.status.numel()
+
+    def take(x: Tensor | None) -> Tensor | None:
+        if x is None:
+            return None
+        tail = x.shape[len(lead):]
+        return x.reshape(n, *tail).index_select(0, rays).reshape(1, 1, -1, *tail)
+
+    hits = tuple(type(h)(**{f.name: take(getattr(h, f.name)) for f in dataclasses.fields(h)}) for h in res.hits)
+    cut = RayTrace(take(res.pos), take(res.dir), take(res.status), take(res.backtrack), hits, take(res.failed_at))
+    return dataclasses.replace(bundle, result=cut)
+
+
+def ramp_tangent_rows(plan: RampPlan, lens: Lens, bundle: Bundle) -> list[Tensor]:
+    """The active ramp rows of ``plan`` at ``bundle`` (inside stage C: their derivatives), in order: the
+    margins of the selected rays, as the residual weighs them ((m / √n)·w, ramp and mask passing)."""
+    if not plan.ramps:
+        return []
+    cut = take_rays(bundle, plan.rays)
+    return [(r.margin(lens, cut).reshape(-1)[r.pick] / r.sqrt_n) * r.weight for r in plan.ramps]
+
+
+def place_ramp_rows(J: Tensor, r: Tensor, size: int, plan: RampPlan, start: dict[str, int]) -> tuple[Tensor, Tensor]:
+    """(J (size, N), ℓ (size,)) from a staged result whose rows after ``size`` are ``ramp_tangent_rows``:
+    those derivatives are put into the terms' rows (``start``: first row of each term's block)."""
+    if not plan.ramps:
+        return J, r
+    extra, J, r = J[size:], J[:size], r[:size]
+    pos = 0
+    for ramp in plan.ramps:
+        n = ramp.rows.numel()
+        J[start[ramp.name] + ramp.rows] = extra[pos:pos + n]
+        pos += n
+    return J, r
 
 
 def split(obj: Any) -> tuple[list[Tensor], list[Tensor], Callable[[list[Tensor], list[Tensor]], Any]]:

@@ -25,6 +25,7 @@ __all__ = [
     "ray_path",
     "ray_path_spans",
     "inactive",
+    "active",
     "ray_path_margin",
     "ray_path_span_margin",
     "ray_angle_margin",
@@ -73,8 +74,14 @@ def gap_lengths(bundle: Bundle) -> Tensor:
 def inactive(margin: Tensor, valid: Tensor) -> bool:
     """Whether every row ramp(margin) of the valid rays is inactive: margin < 0 strictly. Such rows are 0
     with a zero derivative (``clamp_min``'s derivative passes where margin ≥ 0), so a Jacobian may
-    leave their term out of forward mode (``Term.quiet``) and give exactly the same numbers."""
-    return not bool(((margin >= 0) & valid).any())
+    leave them out of forward mode (``Term.margin``) and give exactly the same numbers."""
+    return not bool(active(margin, valid).any())
+
+
+def active(margin: Tensor, valid: Tensor) -> Tensor:
+    """(B, *R) bool: the rows of ramp(margin) whose derivative is not 0: margin ≥ 0 on a valid ray
+    (``valid`` (*R) broadcast over the leading blocks)."""
+    return (margin >= 0) & valid
 
 
 def ray_path_margin(bundle: Bundle, lower: Tensor, upper: Tensor) -> Tensor:

@@ -78,34 +78,38 @@ def test_reusing_the_aiming_solves_of_an_evaluation_changes_no_bit() -> None:
     assert torch.equal(J0, J1) and torch.equal(r0, r1)
 
 
-def test_quiet_terms_are_exact_zero_rows_and_active_ones_are_not_skipped() -> None:
-    # A term whose rows are all inactive ramps (margin < 0 on every valid ray) enters the staged
-    # Jacobian as constants: its rows must be jacfwd's exactly (zeros), its values ℓ's bit for bit.
-    # A tighter ray-angle limit makes some rows active: that term is then differentiated as before.
+def test_ramp_terms_differentiate_their_active_rows_alone() -> None:
+    # Ramp terms enter stage C as constants; the derivatives of their active rows (margin ≥ 0 on a valid
+    # ray) are taken on those rays alone. Against jacfwd over the whole ℓ: every other row exactly 0,
+    # the active rows to rounding, ℓ bit for bit. At the C-mount start no ray-angle or ray-path row is
+    # active (their hit fields are not differentiated at all); a tighter ray-angle limit makes some so.
     data = _study("cmount_4p.toml")
     p = build_problem(parse_spec(data))
     theta = p.theta0
     lens, _ = p.lens(theta)
-    quiet, fields = p.quiet_terms(theta, lens, p.bundle(lens))
-    assert {"ray_path", "ray_angle"} <= set(quiet) and "tra" not in quiet
-    assert not {"cos2_in", "cos2_out", "pos"} & fields
-    ref, r_ref = p.jacobian_jacfwd(theta)
-    J, r = p.jacobian(theta)
-    assert torch.equal(r, r_ref)
-    for name in quiet:
-        assert torch.equal(J[p.slices[name]], torch.zeros_like(J[p.slices[name]]))
-        assert torch.equal(ref[p.slices[name]], J[p.slices[name]])
-    _assert_equal_by_group(p, J, ref)
-    data["optimize"]["constraints"]["ray_angle"]["max_deg"] = 20.0
-    p = build_problem(parse_spec(data))
-    lens, _ = p.lens(theta)
-    quiet, fields = p.quiet_terms(theta, lens, p.bundle(lens))
-    assert "ray_angle" not in quiet and {"cos2_in", "cos2_out"} <= fields
-    ref, r_ref = p.jacobian_jacfwd(theta)
-    J, r = p.jacobian(theta)
-    assert torch.equal(r, r_ref)
-    assert float(ref[p.slices["ray_angle"]].abs().max()) > 0
-    _assert_equal_by_group(p, J, ref)
+    plan = p.ramp_plan(theta, lens, p.bundle(lens))
+    assert {"ray_path", "ray_angle"} <= set(plan.given) and not plan.ramps
+    assert not {"cos2_in", "cos2_out", "pos"} & plan.fields
+    for max_deg, some in ((59.9, False), (20.0, True)):
+        data["optimize"]["constraints"]["ray_angle"]["max_deg"] = max_deg
+        p = build_problem(parse_spec(data))
+        lens, _ = p.lens(theta)
+        plan = p.ramp_plan(theta, lens, p.bundle(lens))
+        active = {r.name: r.rows for r in plan.ramps}
+        assert ("ray_angle" in active) == some
+        ref, r_ref = p.jacobian_jacfwd(theta)
+        J, r = p.jacobian(theta)
+        assert torch.equal(r, r_ref)
+        for name in plan.given:
+            block, want = J[p.slices[name]], ref[p.slices[name]]
+            rows = active.get(name, torch.zeros(0, dtype=torch.long))
+            off = torch.ones(block.shape[0], dtype=torch.bool)
+            off[rows] = False
+            assert torch.equal(block[off], torch.zeros_like(block[off])) and torch.equal(want[off], block[off])
+            if rows.numel():
+                assert float(want[rows].abs().max()) > 0
+        _assert_equal_by_group(p, J, ref)
+        assert 0 < len(active.get("ray_angle", ())) < p.slices["ray_angle"].stop - p.slices["ray_angle"].start or not some
 
 
 def test_a_ramp_at_exactly_zero_is_active() -> None:
