@@ -153,11 +153,16 @@ def _triangle_distance(p: Tensor, a: Tensor, b: Tensor, c: Tensor) -> Tensor:
     return torch.where(inside, plane, edges)
 
 
-def _tracing() -> bool:
-    """Whether a graph is being captured (Dynamo or make_fx)."""
+def _plain_or_captured(g: Tensor) -> tuple[bool, bool]:
+    """(g takes no part in differentiation, the values of g may not be looked at: a graph being
+    captured or a vmapped batch); as ``optics.transforms`` (a layer above) decides."""
+    from torch._C._functorch import is_batchedtensor, is_functorch_wrapped_tensor
+    from torch.autograd.forward_ad import unpack_dual
     from torch.fx.experimental.proxy_tensor import get_proxy_mode
 
-    return torch.compiler.is_compiling() or get_proxy_mode() is not None
+    plain = not ((torch.is_grad_enabled() and g.requires_grad) or is_functorch_wrapped_tensor(g)
+                 or unpack_dual(g).tangent is not None)
+    return plain, torch.compiler.is_compiling() or get_proxy_mode() is not None or is_batchedtensor(g.detach())
 
 
 def mesh_distance(g: Tensor, mesh: GlassMesh) -> Tensor:
@@ -182,12 +187,16 @@ def mesh_distance(g: Tensor, mesh: GlassMesh) -> Tensor:
     # through the nearest facets alone (a minimum's derivative is the mean of its ties', as amin's): on
     # the seed's 3-D mesh this spares forward mode ~180 facets per glass. ``low + (x − x)``: the value
     # of ``low``, bit for bit, with the tangent of x.
-    if _tracing():  # a graph being captured (torch.compile, make_fx): no sizes from data
+    plain, captured = _plain_or_captured(g)
+    if captured:  # no sizes from data: every facet with its derivatives
         nearest = facet_distance(g[:, None, :], fac[None]).amin(-1)
         return torch.where(inside, torch.zeros_like(nearest), nearest)
     with torch.no_grad():
         dist = facet_distance(g.detach()[:, None, :], fac[None])  # (G, B)
         low = dist.amin(-1)
+    if plain:
+        return torch.where(inside, torch.zeros_like(low), low)
+    with torch.no_grad():
         at = dist == low[:, None]
         ties = int(at.sum(-1).max()) if dist.shape[-1] else 1
         order = torch.sort((~at).to(torch.uint8), dim=-1, stable=True).indices[:, :ties]

@@ -148,3 +148,15 @@ def test_mesh_distance_differentiates_only_the_nearest_facets_exactly() -> None:
         J = torch.func.jacfwd(lambda x, m=mesh: mesh_distance(x, m))(g)
         ref = torch.func.jacfwd(lambda x, m=mesh: every_facet(x, m))(g)
         torch.testing.assert_close(J, ref, rtol=0, atol=1e-14)
+
+
+def test_mesh_distance_under_vmap_and_reverse_mode() -> None:
+    # A batch of glass sets (vmap over θ: no sizes from values) and reverse mode give the same numbers.
+    mesh = glass_mesh(glass_space(design_catalog("ohara-recommended"), 3), 1.25)
+    g = torch.tensor(np.random.default_rng(2).normal(scale=1.6, size=(3, 5, 3)))
+    batched = torch.func.vmap(lambda x: mesh_distance(x, mesh))(g)
+    assert torch.equal(batched, torch.stack([mesh_distance(x, mesh) for x in g]))
+    x = g[0].clone().requires_grad_(True)
+    mesh_distance(x, mesh).sum().backward()
+    fwd = torch.func.jacfwd(lambda v: mesh_distance(v, mesh).sum())(g[0])
+    torch.testing.assert_close(x.grad, fwd, rtol=0, atol=1e-14)
