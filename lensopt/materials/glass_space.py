@@ -153,6 +153,18 @@ def _triangle_distance(p: Tensor, a: Tensor, b: Tensor, c: Tensor) -> Tensor:
     return torch.where(inside, plane, edges)
 
 
+def _plain_or_captured(g: Tensor) -> tuple[bool, bool]:
+    """(g takes no part in differentiation, the values of g may not be looked at: a graph being
+    captured or a vmapped batch); as ``optics.transforms`` (a layer above) decides."""
+    from torch._C._functorch import is_batchedtensor, is_functorch_wrapped_tensor
+    from torch.autograd.forward_ad import unpack_dual
+    from torch.fx.experimental.proxy_tensor import get_proxy_mode
+
+    plain = not ((torch.is_grad_enabled() and g.requires_grad) or is_functorch_wrapped_tensor(g)
+                 or unpack_dual(g).tangent is not None)
+    return plain, torch.compiler.is_compiling() or get_proxy_mode() is not None or is_batchedtensor(g.detach())
+
+
 def mesh_distance(g: Tensor, mesh: GlassMesh) -> Tensor:
     """(G,) distance of glass variables g (G, d) to the mesh: 0 inside a kept simplex (S55)."""
     pts = torch.as_tensor(mesh.points, dtype=g.dtype, device=g.device)
@@ -165,12 +177,33 @@ def mesh_distance(g: Tensor, mesh: GlassMesh) -> Tensor:
     tol = 1e-12
     inside = ((lam >= -tol).all(-1) & (lam.sum(-1) <= 1 + tol)).any(-1)  # (G,)
     fac = pts[torch.as_tensor(mesh.facets)]  # (B, d, d)
-    p = g[:, None, :]
-    if d == 2:
-        dist = _segment_distance(p, fac[None, :, 0], fac[None, :, 1])
-    else:
-        dist = _triangle_distance(p, fac[None, :, 0], fac[None, :, 1], fac[None, :, 2])
-    nearest = dist.amin(-1)
+
+    def facet_distance(p: Tensor, f: Tensor) -> Tensor:
+        if d == 2:
+            return _segment_distance(p, f[..., 0, :], f[..., 1, :])
+        return _triangle_distance(p, f[..., 0, :], f[..., 1, :], f[..., 2, :])
+
+    # The distance is the minimum over every facet, found on the values; its derivatives are taken
+    # through the nearest facets alone (a minimum's derivative is the mean of its ties', as amin's): on
+    # the seed's 3-D mesh this spares forward mode ~180 facets per glass. ``low + (x − x)``: the value
+    # of ``low``, bit for bit, with the tangent of x.
+    plain, captured = _plain_or_captured(g)
+    if captured:  # no sizes from data: every facet with its derivatives
+        nearest = facet_distance(g[:, None, :], fac[None]).amin(-1)
+        return torch.where(inside, torch.zeros_like(nearest), nearest)
+    with torch.no_grad():
+        dist = facet_distance(g.detach()[:, None, :], fac[None])  # (G, B)
+        low = dist.amin(-1)
+    if plain:
+        return torch.where(inside, torch.zeros_like(low), low)
+    with torch.no_grad():
+        at = dist == low[:, None]
+        ties = int(at.sum(-1).max()) if dist.shape[-1] else 1
+        order = torch.sort((~at).to(torch.uint8), dim=-1, stable=True).indices[:, :ties]
+        tie = torch.gather(at, 1, order)
+    sub = facet_distance(g[:, None, :], fac[order])  # (G, ties)
+    mean = sub[:, 0] if ties == 1 else torch.where(tie, sub, 0.0).sum(-1) / tie.sum(-1).to(g.dtype)
+    nearest = low + (mean - mean.detach())
     return torch.where(inside, torch.zeros_like(nearest), nearest)
 
 

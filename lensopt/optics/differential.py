@@ -10,6 +10,9 @@ N-column tangents from surface to surface with one batched matrix product per su
 
     Ṫ_out (n, q, N) = L_ray (n, q, 8) · Ṫ_in (n, 8, N) + L_surface (n, q, p) · Ė_s (p, N)
 
+The ray's own rows (q = 6) and the recorded fields that are asked for are chained apart, so that the
+ray's tangents do not depend on which recorded fields the caller reads.
+
 The values are those of ``trace.surface_step`` (the step the trace runs); the derivatives equal
 jacfwd's to rounding (tests/optics/test_differential.py).
 
@@ -292,7 +295,6 @@ def trace_with_tangents(lens: Lens, rays: Rays, lens_dot: Lens, rays_dot: Rays, 
                       failed_at=book.failed_at.long())
     wanted = set(hit_fields(result) if callable(hit_fields) else hit_fields)
     side = sorted(r for f in wanted - {"dir_in"} for r in _SIDE_ROWS[f])
-    rows = list(range(6)) + side
     # Pass 2: the tangents, surface by surface.
     vertex_dot = torch.cat([torch.zeros_like(lens_dot.thickness[:1]), torch.cumsum(lens_dot.thickness, 0)])
     inv_index_dot = -(inv_index * inv_index).unsqueeze(-1) * lens_dot.index
@@ -302,7 +304,7 @@ def trace_with_tangents(lens: Lens, rays: Rays, lens_dot: Lens, rays_dot: Rays, 
 
     def cut(rows_of: tuple[int, ...], tout: Tensor) -> Tensor:
         """The tangents of one field from the chained rows, (*B, 3, N) or (*B, N)."""
-        t = tout[:, [side.index(r) + 6 for r in rows_of]]
+        t = tout[:, [side.index(r) for r in rows_of]]
         return t.reshape(*batch, 3, N) if len(rows_of) == 3 else t.reshape(*batch, N)
 
     hit_dots = []
@@ -317,11 +319,15 @@ def trace_with_tangents(lens: Lens, rays: Rays, lens_dot: Lens, rays_dot: Rays, 
             geo = replace(geo, asphere=lens.asphere[s][:0])
         local = _surface_local(shape, ray_in, media, geo, rec, ok.reshape(-1, 1), lam_mm, 8 + e.shape[0])
         media_dot = torch.stack([lens_dot.index[s][wl_flat], inv_index_dot[s + 1][wl_flat]], 1)
-        tout = _chain([local[r] for r in rows], torch.cat([tray, media_dot], 1), 8, e)
+        tin = torch.cat([tray, media_dot], 1)
+        # The ray's own rows by themselves, the recorded fields apart: the ray's tangents (and so
+        # the spot's) have the same bits whichever fields the terms read.
+        tout = _chain(local[:6], tin, 8, e)
+        tside = _chain([local[r] for r in side], tin, 8, e) if side else None
         dir_in = tray[:, 3:6].reshape(*batch, 3, N)
-        hit_dots.append(SurfaceHit(**{f: (dir_in if f == "dir_in" else cut(_SIDE_ROWS[f], tout))
+        hit_dots.append(SurfaceHit(**{f: (dir_in if f == "dir_in" else cut(_SIDE_ROWS[f], tside))
                                       if f in wanted else None for f in sorted(HIT_FIELDS)}))
-        tray = tout[:, :6]
+        tray = tout
     tray = _chain(_image_local(ray, book.ok, vertex[-1], 7), tray, 6, vertex_dot[-1][None])
     dot = replace(result, pos=tray[:, 0:3].reshape(*batch, 3, N), dir=tray[:, 3:6].reshape(*batch, 3, N),
                   hits=tuple(hit_dots))

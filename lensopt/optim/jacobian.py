@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Collection
+from dataclasses import dataclass
 from typing import Any
 
 import torch
@@ -30,7 +31,82 @@ from lensopt.optics.differential import trace_with_tangents
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.trace import RayTrace
 
-__all__ = ["split", "tangent_leaves", "staged_jacobian"]
+__all__ = ["split", "tangent_leaves", "staged_jacobian", "RampRows", "RampPlan", "take_rays", "place_ramp_rows"]
+
+
+@dataclass(frozen=True)
+class RampRows:
+    """The active rows of one ramp term (``Term.margin``) at θ, differentiated apart from the rest.
+
+    Attributes:
+        name: the term (its block of ℓ: ``Problem.slices[name]``).
+        margin: (lens, bundle) ↦ (B, F, W, P) the term's margins.
+        weight: the term's static weight.
+        sqrt_n: √(F·W·P), the residual's divisor.
+        pick: (A,) the active rows among the margins of the selected rays (``RampPlan.rays``), flattened.
+        rows: (A,) the same rows in the term's block of ℓ.
+    """
+
+    name: str
+    margin: Callable[[Lens, Bundle], Tensor]
+    weight: float
+    sqrt_n: float
+    pick: Tensor
+    rows: Tensor
+
+
+@dataclass(frozen=True)
+class RampPlan:
+    """How the Jacobian takes the ramp terms at θ: ``given`` their rows of ℓ (constants in stage C: each
+    inactive row's derivative is exactly 0), ``ramps`` the active rows of each term that has any,
+    ``rays`` (K,) the rays (flat F·W·P index) those rows belong to, ``fields`` the recorded hit fields
+    whose derivatives the terms read (``Term.reads``; none for a term without an active row)."""
+
+    given: dict[str, Tensor]
+    ramps: tuple[RampRows, ...]
+    rays: Tensor | None
+    fields: frozenset[str]
+
+
+def take_rays(bundle: Bundle, rays: Tensor) -> Bundle:
+    """``bundle`` with its trace cut to the rays ``rays`` (K,) (flat F·W·P indices), batch (1, 1, K): what
+    the margins of ramp terms read (the hits and the end of the trace); the rest is ``bundle``'s."""
+    res = bundle.result
+    lead = res.status.shape
+    n = res.status.numel()
+
+    def take(x: Tensor | None) -> Tensor | None:
+        if x is None:
+            return None
+        tail = x.shape[len(lead):]
+        return x.reshape(n, *tail).index_select(0, rays).reshape(1, 1, -1, *tail)
+
+    hits = tuple(type(h)(**{f.name: take(getattr(h, f.name)) for f in dataclasses.fields(h)}) for h in res.hits)
+    cut = RayTrace(take(res.pos), take(res.dir), take(res.status), take(res.backtrack), hits, take(res.failed_at))
+    return dataclasses.replace(bundle, result=cut)
+
+
+def ramp_tangent_rows(plan: RampPlan, lens: Lens, bundle: Bundle) -> list[Tensor]:
+    """The active ramp rows of ``plan`` at ``bundle`` (inside stage C: their derivatives), in order: the
+    margins of the selected rays, as the residual weighs them ((m / √n)·w, ramp and mask passing)."""
+    if not plan.ramps:
+        return []
+    cut = take_rays(bundle, plan.rays)
+    return [(r.margin(lens, cut).reshape(-1)[r.pick] / r.sqrt_n) * r.weight for r in plan.ramps]
+
+
+def place_ramp_rows(J: Tensor, r: Tensor, size: int, plan: RampPlan, start: dict[str, int]) -> tuple[Tensor, Tensor]:
+    """(J (size, N), ℓ (size,)) from a staged result whose rows after ``size`` are ``ramp_tangent_rows``:
+    those derivatives are put into the terms' rows (``start``: first row of each term's block)."""
+    if not plan.ramps:
+        return J, r
+    extra, J, r = J[size:], J[:size], r[:size]
+    pos = 0
+    for ramp in plan.ramps:
+        n = ramp.rows.numel()
+        J[start[ramp.name] + ramp.rows] = extra[pos:pos + n]
+        pos += n
+    return J, r
 
 
 def split(obj: Any) -> tuple[list[Tensor], list[Tensor], Callable[[list[Tensor], list[Tensor]], Any]]:
@@ -91,11 +167,12 @@ def tangent_leaves(primal: Any, tangent: Any) -> list[Tensor | None]:
 
 def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_of: Callable[[Lens], Launch],
                     terms_of: Callable[[Tensor, Lens, Bundle], Tensor],
-                    hit_fields: Callable[[Bundle], Collection[str]], system: System) -> tuple[Tensor, Tensor]:
+                    hit_fields: Callable[[Lens, Bundle], Collection[str]], system: System) -> tuple[Tensor, Tensor]:
     """(J (M, N), ℓ (M,)) at θ by stages A, B, C (module docstring), for the residual function
     θ ↦ ``terms_of(θ, lens, finish_bundle(system, launch, trace(lens, launch.rays, record=True)))`` with
-    ``lens = lens_of(θ)``, ``launch = launch_of(lens)``; ``hit_fields(bundle)``: the recorded hit fields
-    the terms read (``Term.reads``). The lens must have no placement (``optics.differential.supported``)."""
+    ``lens = lens_of(θ)``, ``launch = launch_of(lens)``; ``hit_fields(lens, bundle)``: the recorded hit
+    fields whose derivatives the terms read (``Term.reads``), at the primal lens and traced bundle (called
+    once, before ``terms_of``). The lens must have no placement (``optics.differential.supported``)."""
     holder: dict[str, Any] = {}
 
     def stage_a(t: Tensor) -> tuple[tuple[Tensor, ...], tuple[tuple[Tensor, ...], tuple[Tensor, ...]]]:
@@ -110,7 +187,7 @@ def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_
     lens_dot, start_dot = rebuild_a(list(dots_a), list(ot_a))
 
     def reads(result: RayTrace) -> Collection[str]:
-        return hit_fields(finish_bundle(system, start, result))
+        return hit_fields(lens, finish_bundle(system, start, result))
 
     result, result_dot = trace_with_tangents(lens, start.rays, lens_dot, start_dot.rays, hit_fields=reads)
     fl_b, ot_b, rebuild_b = split(result)

@@ -129,6 +129,9 @@ class LevenbergMarquardt:
         self._J: Tensor | None = None
         self._r: Tensor | None = None
         self._scale_for_D: Tensor | None = None
+        self._rows: Tensor | None = None  # rows of J that are not all zero where ℓ is 0 (``_ensure_jacobian``)
+        self._J_rows: Tensor | None = None
+        self._col: tuple[Tensor, Tensor] | None = None  # (scale, column norms of scale ⊙ J) of this J
         self.history: list[float] = []
         self.accepted = 0
         self.rejected = 0
@@ -157,7 +160,8 @@ class LevenbergMarquardt:
         self.damping = float(values["damping"])
         self.history = [float(h) for h in values["history"]]
         self.accepted, self.rejected = int(values["accepted"]), int(values["rejected"])
-        self._J = self._r = None
+        self._forget_jacobian()
+        self._r = None
         self._keep_D = bool(values["jacobian_held"]) and self.D is not None
 
     def merit(self, scale: Tensor) -> float:
@@ -172,7 +176,13 @@ class LevenbergMarquardt:
             self._J, self._r = J.detach(), r.detach()
             with one_thread():
                 col = torch.linalg.vector_norm(scale[:, None] * self._J, dim=0)
+                # The rows ``damped_step`` can use: a row that is 0 with a zero gradient (an inactive
+                # constraint) stays so under any row multiplier. The steps work on these rows only
+                # (on the aimed studies ≤ 10 % of M), which ``damped_step`` would select anyway.
+                self._rows = ((self._r != 0) | (self._J != 0).any(1)).nonzero().squeeze(1)
+                self._J_rows = self._J.index_select(0, self._rows)
             col = torch.where(torch.isfinite(col), col, torch.zeros_like(col))
+            self._col = (scale.clone(), col)
             s = self.settings
             if self._keep_D:  # this J was held when the run was snapshotted: D has seen it
                 self._keep_D = False
@@ -189,16 +199,23 @@ class LevenbergMarquardt:
 
     def _step(self, scale: Tensor, caller_threads: int) -> StepInfo:
         s = self.settings
-        J, r = scale[:, None] * self._J, scale * self._r
+        r = scale * self._r
         if not bool(torch.isfinite(r).all()):
             return self._reject(float("inf"), "non-finite residuals")
         # A column with a non-finite entry (a derivative that could not be evaluated) counts as dead:
-        # that variable does not move in this step.
-        col = torch.linalg.vector_norm(J, dim=0)
-        col = torch.where(torch.isfinite(col), col, torch.zeros_like(col))
+        # that variable does not move in this step. The norms are those of the whole J (all rows, in
+        # their order: the same rounding), kept from ``_ensure_jacobian`` while the multipliers hold.
+        if self._col is not None and torch.equal(self._col[0], scale):
+            col = self._col[1]
+        else:
+            col = torch.linalg.vector_norm(scale[:, None] * self._J, dim=0)
+            col = torch.where(torch.isfinite(col), col, torch.zeros_like(col))
+            self._col = (scale.clone(), col)
+        rows = self._rows
+        J = scale.index_select(0, rows)[:, None] * self._J_rows
         J = torch.where(col > DEAD_COLUMN * col.max(), J, torch.zeros_like(J))
         merit = 0.5 * float((r**2).sum())
-        delta = damped_step(J, r, self.D, self.damping)
+        delta = damped_step(J, r.index_select(0, rows), self.D, self.damping)
         if not bool(torch.isfinite(delta).all()):
             return self._reject(merit, "non-finite step")
         with threads(caller_threads):
@@ -216,7 +233,8 @@ class LevenbergMarquardt:
             self.history.append(merit)
             return StepInfo(False, merit, self.damping, "merit rose")
         self.theta = self.theta + delta
-        self._J, self._r = None, trial.residuals.detach()
+        self._forget_jacobian()
+        self._r = trial.residuals.detach()
         self.accepted += 1
         self.history.append(new)
         return StepInfo(True, new, self.damping, "")
@@ -241,7 +259,7 @@ class LevenbergMarquardt:
     def invalidate(self) -> None:
         """Forget ℓ and J at the current θ (the residual function changed, e.g. a new image batch and
         GTRA target): the next step evaluates them again. λ and D are kept."""
-        self._J = None
+        self._forget_jacobian()
         self._r = None
         self._keep_D = False  # a new J: D sees it
 
@@ -249,5 +267,8 @@ class LevenbergMarquardt:
         """Back to the initial damping and damping matrix (after binding glasses, S4.1.3)."""
         self.damping = self.settings.damping
         self.D = None
-        self._J = None
+        self._forget_jacobian()
         self.history.clear()
+
+    def _forget_jacobian(self) -> None:
+        self._J = self._J_rows = self._rows = self._col = None

@@ -12,6 +12,7 @@ glass-catalog schedule) are row multipliers applied by the optimizer (``row_scal
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -34,7 +35,7 @@ from lensopt.optics.sampling import PupilSampling
 from lensopt.optics.transforms import carries_derivatives
 from lensopt.optim import residuals
 from lensopt.optim.image_objective import ImageObjective
-from lensopt.optim.jacobian import staged_jacobian
+from lensopt.optim.jacobian import RampPlan, RampRows, place_ramp_rows, ramp_tangent_rows, staged_jacobian
 from lensopt.optim.rays import head, with_rim
 from lensopt.optim.schedule import schedule_weight
 from lensopt.optim.settings import ImageSettings, OptimizeSettings
@@ -304,24 +305,60 @@ class Problem:
         lens, _ = self.lens(theta)
         return self._terms(theta, lens, self.bundle(lens))
 
-    def _terms(self, theta: Tensor, lens: Lens, bundle: Bundle) -> dict[str, Tensor]:
-        """The registered terms (``lensopt.optim.terms``), each times its static weight: spot terms
-        (TRA, distortion, illumination) from the spot sample; geometric constraints and failures from
-        every ray, the rim rays included."""
+    def _context(self, theta: Tensor, lens: Lens, bundle: Bundle) -> TermContext:
         spot = head(bundle, self.num_spot)
         stats = spot_stats(spot, self.system.wavelength_weights, self.field_weights)
-        ctx = TermContext(self.term_setup, theta, lens, bundle, spot, stats)
+        return TermContext(self.term_setup, theta, lens, bundle, spot, stats)
+
+    def _terms(self, theta: Tensor, lens: Lens, bundle: Bundle,
+               given: dict[str, Tensor] | None = None) -> dict[str, Tensor]:
+        """The registered terms (``lensopt.optim.terms``), each times its static weight: spot terms
+        (TRA, distortion, illumination) from the spot sample; geometric constraints and failures from
+        every ray, the rim rays included. ``given``: rows of terms already computed (by name)."""
+        ctx = self._context(theta, lens, bundle)
         out: dict[str, Tensor] = {}
         for t in TERMS:
             w = t.weight(self.term_setup)
             if w is None:
                 continue
-            out[t.name] = t.residual(ctx) * w
+            out[t.name] = given[t.name] if given and t.name in given else t.residual(ctx) * w
         return out
 
     def hit_fields(self, bundle: Bundle) -> set[str]:
         """The recorded hit fields whose derivatives the active terms read at ``bundle`` (``Term.reads``)."""
         return {f for t in TERMS if t.weight(self.term_setup) is not None for f in t.reads(bundle)}
+
+    def ramp_plan(self, theta: Tensor, lens: Lens, bundle: Bundle) -> RampPlan:
+        """How the staged Jacobian takes the ramp terms (``Term.margin``) at the traced ``bundle`` of
+        ``lens``: their rows of ℓ, the active rows of each (margin ≥ 0 on a valid ray: the only ones
+        whose derivative is not exactly 0) and the hit fields the terms read (``RampPlan``)."""
+        ctx = self._context(theta, lens, bundle)
+        valid = bundle.result.valid
+        n_r = valid.numel()
+        given: dict[str, Tensor] = {}
+        fields: set[str] = set()
+        found = []
+        for t in TERMS:
+            w = t.weight(self.term_setup)
+            if w is None:
+                continue
+            if t.margin is None:
+                fields.update(t.reads(bundle))
+                continue
+            given[t.name] = t.residual(ctx) * w
+            act = residuals.active(t.margin(self.term_setup, lens, bundle), valid).reshape(-1, n_r)
+            if bool(act.any()):
+                fields.update(t.reads(bundle))
+                found.append((t, w, act))
+        if not found:
+            return RampPlan(given, (), None, frozenset(fields))
+        rays = torch.stack([act.any(0) for _, _, act in found]).any(0).nonzero().squeeze(1)
+        ramps = []
+        for t, w, act in found:
+            b, k = act[:, rays].nonzero(as_tuple=True)
+            ramps.append(RampRows(t.name, functools.partial(t.margin, self.term_setup), w, math.sqrt(n_r),
+                                  b * rays.numel() + k, b * n_r + rays[k]))
+        return RampPlan(given, tuple(ramps), rays, frozenset(fields))
 
     def residuals(self, theta: Tensor) -> Tensor:
         """(M,) ℓ(θ): the one residual function (pure in θ)."""
@@ -332,12 +369,24 @@ class Problem:
         apply, else ``torch.func.jacfwd`` over the whole residual function (the same derivatives)."""
         if self.image is not None or not supported(self.setup.lens):
             return self.jacobian_jacfwd(theta)
-        def terms_of(t: Tensor, lens: Lens, bundle: Bundle) -> Tensor:
-            return torch.cat(list(self._terms(t, lens, bundle).values()))
+        # Ramp terms (``Term.margin``) enter stage C as constants; the derivatives of their active rows
+        # (on the aimed studies ≤ 10 % of them, often none) are taken on those rows' rays alone and
+        # put in place; every other row of theirs has a derivative of exactly 0. The trace's
+        # derivatives skip the hit fields that only terms without an active row read.
+        plan: list[RampPlan] = []
 
-        return staged_jacobian(theta, lens_of=lambda t: self.lens(t)[0],
+        def hit_fields(lens: Lens, bundle: Bundle) -> frozenset[str]:
+            plan.append(self.ramp_plan(theta.detach(), lens, bundle))
+            return plan[0].fields
+
+        def terms_of(t: Tensor, lens: Lens, bundle: Bundle) -> Tensor:
+            parts = list(self._terms(t, lens, bundle, plan[0].given).values())
+            return torch.cat(parts + ramp_tangent_rows(plan[0], lens, bundle))
+
+        J, r = staged_jacobian(theta, lens_of=lambda t: self.lens(t)[0],
                                launch_of=lambda lens: self.launch(lens, theta), terms_of=terms_of,
-                               hit_fields=self.hit_fields, system=self.system)
+                               hit_fields=hit_fields, system=self.system)
+        return place_ramp_rows(J, r, self.size, plan[0], {name: sl.start for name, sl in self.slices.items()})
 
     def jacobian_jacfwd(self, theta: Tensor) -> tuple[Tensor, Tensor]:
         """(M, N) Jacobian by ``torch.func.jacfwd`` over ``residuals`` and ℓ(θ) (M,): the reference."""

@@ -24,6 +24,12 @@ __all__ = [
     "gap_lengths",
     "ray_path",
     "ray_path_spans",
+    "inactive",
+    "active",
+    "ray_path_margin",
+    "ray_path_span_margin",
+    "ray_angle_margin",
+    "surface_normal_margin",
     "ray_angle",
     "surface_normal",
     "distortion",
@@ -65,11 +71,29 @@ def gap_lengths(bundle: Bundle) -> Tensor:
     return z[1:] - z[:-1]
 
 
-def ray_path(bundle: Bundle, lower: Tensor, upper: Tensor) -> Tensor:
-    """(S n_r,) ray path residuals (S41–S42) for per-gap bounds ``lower``/``upper`` (S,) in mm."""
+def inactive(margin: Tensor, valid: Tensor) -> bool:
+    """Whether every row ramp(margin) of the valid rays is inactive: margin < 0 strictly. Such rows are 0
+    with a zero derivative (``clamp_min``'s derivative passes where margin ≥ 0), so a Jacobian may
+    leave them out of forward mode (``Term.margin``) and give exactly the same numbers."""
+    return not bool(active(margin, valid).any())
+
+
+def active(margin: Tensor, valid: Tensor) -> Tensor:
+    """(B, *R) bool: the rows of ramp(margin) whose derivative is not 0: margin ≥ 0 on a valid ray
+    (``valid`` (*R) broadcast over the leading blocks)."""
+    return (margin >= 0) & valid
+
+
+def ray_path_margin(bundle: Bundle, lower: Tensor, upper: Tensor) -> Tensor:
+    """(S, F, W, P) how far each ray's axial path per gap is outside [lower, upper] (mm; < 0 inside)."""
     tz = gap_lengths(bundle)
     lo, hi = lower[:, None, None, None], upper[:, None, None, None]
-    d = _ramp(torch.maximum(tz - hi, lo - tz))
+    return torch.maximum(tz - hi, lo - tz)
+
+
+def ray_path(bundle: Bundle, lower: Tensor, upper: Tensor) -> Tensor:
+    """(S n_r,) ray path residuals (S41–S42) for per-gap bounds ``lower``/``upper`` (S,) in mm."""
+    d = _ramp(ray_path_margin(bundle, lower, upper))
     d = torch.where(bundle.result.valid.unsqueeze(0), d, 0.0)
     return d.reshape(-1) / math.sqrt(bundle.result.status.numel())
 
@@ -78,39 +102,58 @@ def ray_path_spans(bundle: Bundle, spans: list[tuple[int, int, float, float]]) -
     """(K n_r,) ray path residuals on runs of gaps: for each span (first, stop, lower, upper) the axial
     distance t = Σ t_z over the gaps first … stop − 1 (surface ``first`` to surface ``stop``, the image
     being surface S) must lie in [lower, upper]; rows ramp(max(t − upper, lower − t))/√n_r."""
-    tz = gap_lengths(bundle)
     valid = bundle.result.valid
-    out = [torch.where(valid, _ramp(torch.maximum(tz[a:b].sum(0) - hi, lo - tz[a:b].sum(0))), 0.0)
-           for a, b, lo, hi in spans]
-    if not out:
-        return tz.new_zeros(0)
+    margin = ray_path_span_margin(bundle, spans)
+    if margin.shape[0] == 0:
+        return margin.reshape(-1)
+    out = [torch.where(valid, _ramp(m), 0.0) for m in margin.unbind(0)]
     return torch.stack(out).reshape(-1) / math.sqrt(bundle.result.status.numel())
+
+
+def ray_path_span_margin(bundle: Bundle, spans: list[tuple[int, int, float, float]]) -> Tensor:
+    """(K, F, W, P) ``ray_path_spans``' margins: max(t − upper, lower − t) per span and ray (mm)."""
+    tz = gap_lengths(bundle)
+    out = [torch.maximum(tz[a:b].sum(0) - hi, lo - tz[a:b].sum(0)) for a, b, lo, hi in spans]
+    return torch.stack(out) if out else tz.new_zeros((0, *tz.shape[1:]))
 
 
 def ray_angle(bundle: Bundle, surfaces: list[int], max_deg: float) -> Tensor:
     """(2 I n_r,) ray angle residuals (S43–S45) at the interfaces ``surfaces``: ramp(cos²θmax − ζ)
     for ζ_I = cos² of incidence and ζ_R = cos² of refraction (negative on TIR)."""
     res = bundle.result
+    if not surfaces:
+        return res.pos.new_zeros(0)
+    d = torch.where(res.valid.unsqueeze(0), _ramp(ray_angle_margin(bundle, surfaces, max_deg)), 0.0)
+    return d.reshape(-1) / math.sqrt(res.status.numel())
+
+
+def ray_angle_margin(bundle: Bundle, surfaces: list[int], max_deg: float) -> Tensor:
+    """(2 I, F, W, P) ``ray_angle``'s margins cos²θmax − ζ, incidence and refraction of each surface."""
+    res = bundle.result
     c2 = math.cos(math.radians(max_deg)) ** 2
     out = []
     for s in surfaces:
         h = res.hits[s]
-        out += [_ramp(c2 - h.cos2_in), _ramp(c2 - h.cos2_out)]
-    if not out:
-        return res.pos.new_zeros(0)
-    d = torch.where(res.valid.unsqueeze(0), torch.stack(out), 0.0)
-    return d.reshape(-1) / math.sqrt(res.status.numel())
+        out += [c2 - h.cos2_in, c2 - h.cos2_out]
+    return torch.stack(out) if out else res.pos.new_zeros((0, *res.status.shape))
 
 
 def surface_normal(bundle: Bundle, surfaces: list[int], max_deg: float) -> Tensor:
     """(I n_r,) surface normal residuals (S46–S47): ramp(cos²θmax − n_z²) where rays hit."""
     res = bundle.result
-    c2 = math.cos(math.radians(max_deg)) ** 2
     if not surfaces:
         return res.pos.new_zeros(0)
-    nz2 = torch.stack([res.hits[s].normal[..., 2] ** 2 for s in surfaces])
-    d = torch.where(res.valid.unsqueeze(0), _ramp(c2 - nz2), 0.0)
+    d = torch.where(res.valid.unsqueeze(0), _ramp(surface_normal_margin(bundle, surfaces, max_deg)), 0.0)
     return d.reshape(-1) / math.sqrt(res.status.numel())
+
+
+def surface_normal_margin(bundle: Bundle, surfaces: list[int], max_deg: float) -> Tensor:
+    """(I, F, W, P) ``surface_normal``'s margins cos²θmax − n_z²."""
+    res = bundle.result
+    c2 = math.cos(math.radians(max_deg)) ** 2
+    if not surfaces:
+        return res.pos.new_zeros((0, *res.status.shape))
+    return c2 - torch.stack([res.hits[s].normal[..., 2] ** 2 for s in surfaces])
 
 
 def distortion(lens: Lens, system: System, bundle: Bundle, stats: SpotStats, max_fraction: float) -> Tensor:

@@ -103,6 +103,10 @@ class Term:
         config: setup ↦ the settings object of the term (its ``schedule`` is used), or None.
         reads: bundle ↦ the fields of the recorded hits (``SurfaceHit``) whose derivatives the
             residual needs at this bundle (``optim.jacobian`` computes only those); all by default.
+        margin: for a ramp term, (setup, lens, bundle) ↦ (B, F, W, P) its margins m, such that the
+            residual is ``where(valid, ramp(m), 0)`` flattened, divided by √(F·W·P) (block b, ray k
+            is row b·F·W·P + k): its derivative is 0 wherever m < 0 (``residuals.inactive``), so the
+            Jacobian differentiates the active rows alone (``Problem.jacobian``). None: every row.
     """
 
     name: str
@@ -111,6 +115,7 @@ class Term:
     residual: Callable[[TermContext], Tensor]
     config: Callable[[TermSetup], Any] = lambda s: None
     reads: Callable[[Bundle], Collection[str]] = lambda b: HIT_FIELDS
+    margin: Callable[[TermSetup, Lens, Bundle], Tensor] | None = None
 
 
 def _cons(name: str) -> Callable[[TermSetup], Any]:
@@ -151,6 +156,21 @@ def _nothing(bundle: Bundle) -> Collection[str]:
     return ()
 
 
+def _ray_path_margin(s: TermSetup, lens: Lens, bundle: Bundle) -> Tensor:
+    gaps = res.ray_path_margin(bundle, *s.gap_bounds(lens))
+    if not s.path_spans:
+        return gaps
+    return torch.cat([gaps, res.ray_path_span_margin(bundle, list(s.path_spans))])
+
+
+def _ray_angle_margin(s: TermSetup, lens: Lens, bundle: Bundle) -> Tensor:
+    return res.ray_angle_margin(bundle, list(s.interfaces), s.settings.constraints.ray_angle.max_deg)
+
+
+def _surface_normal_margin(s: TermSetup, lens: Lens, bundle: Bundle) -> Tensor:
+    return res.surface_normal_margin(bundle, list(s.refracting), s.settings.constraints.surface_normal.max_deg)
+
+
 TERMS: tuple[Term, ...] = (
     Term("tra", "transverse ray aberrations about the field centroids, ‖ℓ‖ = ESR (S37–S39)",
          lambda s: s.settings.tra.weight if s.objective == "spot" and s.settings.tra.weight > 0 else None,
@@ -166,14 +186,14 @@ TERMS: tuple[Term, ...] = (
     Term("image_loss", "√(2 L) of the image loss (scalar, for Adam)", _image_weight("scalar"),
          lambda c: c.setup.image.scalar(c.lens)),
     Term("ray_path", "axial ray path per gap (and per span of gaps) within its bounds (S41–S42)",
-         _cons_weight("ray_path"), _ray_path, _cons("ray_path"), lambda b: ("pos",)),
+         _cons_weight("ray_path"), _ray_path, _cons("ray_path"), lambda b: ("pos",), _ray_path_margin),
     Term("ray_angle", "angles of incidence and refraction (S43–S45)", _cons_weight("ray_angle"),
          lambda c: res.ray_angle(c.bundle, list(c.setup.interfaces), c.setup.settings.constraints.ray_angle.max_deg),
-         _cons("ray_angle"), lambda b: ("cos2_in", "cos2_out")),
+         _cons("ray_angle"), lambda b: ("cos2_in", "cos2_out"), _ray_angle_margin),
     Term("surface_normal", "surface normal angles where rays hit (S46–S47)", _cons_weight("surface_normal"),
          lambda c: res.surface_normal(c.bundle, list(c.setup.refracting),
                                       c.setup.settings.constraints.surface_normal.max_deg),
-         _cons("surface_normal"), lambda b: ("normal",)),
+         _cons("surface_normal"), lambda b: ("normal",), _surface_normal_margin),
     Term("distortion", "distortion per field (S48–S50)", _cons_weight("distortion"),
          lambda c: res.distortion(c.lens, c.setup.system, c.spot, c.stats,
                                   c.setup.settings.constraints.distortion.max_percent / 100),

@@ -119,3 +119,44 @@ def test_catalog_distance_and_nearest() -> None:
     brute = np.min(np.linalg.norm(g.numpy()[:, None] - sp.points[None], axis=-1), axis=1)
     np.testing.assert_allclose(d.numpy(), brute, rtol=1e-12)
     assert nearest_glass(g, sp) == [3, 7]
+
+
+def test_mesh_distance_differentiates_only_the_nearest_facets_exactly() -> None:
+    # mesh_distance takes its derivatives through the nearest facets only. Reference: the distance to
+    # every boundary facet and its minimum (amin: the mean of the ties' derivatives), by jacfwd.
+    from lensopt.materials.glass_space import _segment_distance, _triangle_distance
+
+    def every_facet(g: torch.Tensor, mesh) -> torch.Tensor:  # noqa: ANN001
+        pts = torch.as_tensor(mesh.points, dtype=g.dtype)
+        fac = pts[torch.as_tensor(mesh.facets)]
+        p = g[:, None, :]
+        if fac.shape[1] == 2:
+            dist = _segment_distance(p, fac[None, :, 0], fac[None, :, 1])
+        else:
+            dist = _triangle_distance(p, fac[None, :, 0], fac[None, :, 1], fac[None, :, 2])
+        inside = mesh_distance(g.detach(), mesh) == 0
+        return torch.where(inside, 0.0, dist.amin(-1))
+
+    rng = np.random.default_rng(7)
+    sq = glass_mesh(_space([(0, 0), (1, 0), (1, 1), (0, 1)]), 2.0)
+    ohara = glass_mesh(glass_space(design_catalog("ohara-recommended"), 3), 1.25)
+    # Two 2-D points equidistant from two edges (a tie: amin's derivative is the mean of the two).
+    cases = [(sq, torch.tensor([[0.5, 0.5], [1.5, 0.5], [-1.0, -1.0], [2.0, 2.0], [0.5, -0.25]], dtype=torch.float64)),
+             (ohara, torch.tensor(rng.normal(scale=1.6, size=(40, 3))))]
+    for mesh, g in cases:
+        assert torch.equal(mesh_distance(g, mesh), every_facet(g, mesh))
+        J = torch.func.jacfwd(lambda x, m=mesh: mesh_distance(x, m))(g)
+        ref = torch.func.jacfwd(lambda x, m=mesh: every_facet(x, m))(g)
+        torch.testing.assert_close(J, ref, rtol=0, atol=1e-14)
+
+
+def test_mesh_distance_under_vmap_and_reverse_mode() -> None:
+    # A batch of glass sets (vmap over θ: no sizes from values) and reverse mode give the same numbers.
+    mesh = glass_mesh(glass_space(design_catalog("ohara-recommended"), 3), 1.25)
+    g = torch.tensor(np.random.default_rng(2).normal(scale=1.6, size=(3, 5, 3)))
+    batched = torch.func.vmap(lambda x: mesh_distance(x, mesh))(g)
+    assert torch.equal(batched, torch.stack([mesh_distance(x, mesh) for x in g]))
+    x = g[0].clone().requires_grad_(True)
+    mesh_distance(x, mesh).sum().backward()
+    fwd = torch.func.jacfwd(lambda v: mesh_distance(v, mesh).sum())(g[0])
+    torch.testing.assert_close(x.grad, fwd, rtol=0, atol=1e-14)

@@ -100,6 +100,10 @@ def test_only_the_requested_hit_fields_get_tangents() -> None:
         assert h_part.normal is None and h_part.t is None and h_part.dir_out is None
         assert torch.equal(h_part.cos2_out, h_full.cos2_out) and torch.equal(h_part.pos, h_full.pos)
     assert torch.equal(part.pos, full.pos) and torch.equal(part.dir, full.dir)
+    # No recorded field at all (every constraint quiet): the ray's tangents keep their bits.
+    _, bare = trace_with_tangents(lens, rays, lens_dot, rays_dot, hit_fields=())
+    assert all(h.pos is None and h.cos2_in is None for h in bare.hits)
+    assert torch.equal(bare.pos, full.pos) and torch.equal(bare.dir, full.dir)
 
 
 def test_a_placed_lens_is_refused() -> None:

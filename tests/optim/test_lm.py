@@ -156,3 +156,35 @@ def test_a_non_finite_jacobian_column_does_not_move_its_variable() -> None:
     info = lm.step(torch.ones(2, dtype=torch.float64))
     assert info.accepted and math.isfinite(info.merit)
     assert float(lm.theta[0]) == -1.2 and float(lm.theta[1]) != 1.0
+
+
+def test_steps_on_the_live_rows_equal_the_full_system_bit_for_bit() -> None:
+    # LM keeps only the rows of J that are not (ℓ = 0, zero gradient) — inactive ramp constraints —
+    # and the column norms of the whole J. Reference: the step written out on the whole (M, N) system
+    # (the multipliers, the dead-column rule, ``damped_step``'s own row selection), as LM did before.
+    rng = np.random.default_rng(3)
+    A = torch.tensor(rng.normal(size=(60, 4)))
+    b = torch.tensor(rng.normal(size=60))
+
+    def fun(t: torch.Tensor) -> torch.Tensor:  # half of the rows are ramps that stay inactive near t0
+        lin = A @ t + b
+        return torch.cat([torch.tanh(lin[:30]), torch.clamp_min(lin[30:] - 50.0, 0.0)])
+
+    lm = _lm(fun, [0.1, -0.2, 0.3, 0.05])
+    scales = [torch.ones(60, dtype=torch.float64), torch.linspace(0.5, 2.0, 60, dtype=torch.float64)]
+    for k in range(6):
+        scale = scales[k % 2]
+        theta, D, damping = lm.theta.clone(), None if lm.D is None else lm.D.clone(), lm.damping
+        J, r = torch.func.jacfwd(fun)(theta), fun(theta)
+        col = torch.linalg.vector_norm(scale[:, None] * J, dim=0)
+        s = lm.settings
+        D = col.clamp_min(s.epsilon) if D is None else (D if lm._J is not None else  # noqa: SLF001
+                                                          s.beta * torch.maximum(D, col) + (1 - s.beta) * col)
+        Js, rs = scale[:, None] * J, scale * r
+        Js = torch.where(col > 1e-9 * col.max(), Js, torch.zeros_like(Js))
+        expected = theta + damped_step(Js, rs, D, damping)
+        info = lm.step(scale)
+        assert torch.equal(lm.D, D)
+        if info.accepted:
+            assert torch.equal(lm.theta, expected)
+    assert lm.accepted >= 2

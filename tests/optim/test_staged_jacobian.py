@@ -76,3 +76,52 @@ def test_reusing_the_aiming_solves_of_an_evaluation_changes_no_bit() -> None:
     assert p.solved_shape(theta) is not None and p.solved_shape(theta * (1 + 1e-15)) is None
     J1, r1 = p.jacobian(theta)
     assert torch.equal(J0, J1) and torch.equal(r0, r1)
+
+
+def test_ramp_terms_differentiate_their_active_rows_alone() -> None:
+    # Ramp terms enter stage C as constants; the derivatives of their active rows (margin ≥ 0 on a valid
+    # ray) are taken on those rays alone. Against jacfwd over the whole ℓ: every other row exactly 0,
+    # the active rows to rounding, ℓ bit for bit. At the C-mount start no ray-angle or ray-path row is
+    # active (their hit fields are not differentiated at all); a tighter ray-angle limit makes some so.
+    data = _study("cmount_4p.toml")
+    p = build_problem(parse_spec(data))
+    theta = p.theta0
+    lens, _ = p.lens(theta)
+    plan = p.ramp_plan(theta, lens, p.bundle(lens))
+    assert {"ray_path", "ray_angle"} <= set(plan.given) and not plan.ramps
+    assert not {"cos2_in", "cos2_out", "pos"} & plan.fields
+    for max_deg, some in ((59.9, False), (20.0, True)):
+        data["optimize"]["constraints"]["ray_angle"]["max_deg"] = max_deg
+        p = build_problem(parse_spec(data))
+        lens, _ = p.lens(theta)
+        plan = p.ramp_plan(theta, lens, p.bundle(lens))
+        active = {r.name: r.rows for r in plan.ramps}
+        assert ("ray_angle" in active) == some
+        ref, r_ref = p.jacobian_jacfwd(theta)
+        J, r = p.jacobian(theta)
+        assert torch.equal(r, r_ref)
+        for name in plan.given:
+            block, want = J[p.slices[name]], ref[p.slices[name]]
+            rows = active.get(name, torch.zeros(0, dtype=torch.long))
+            off = torch.ones(block.shape[0], dtype=torch.bool)
+            off[rows] = False
+            assert torch.equal(block[off], torch.zeros_like(block[off])) and torch.equal(want[off], block[off])
+            if rows.numel():
+                assert float(want[rows].abs().max()) > 0
+        _assert_equal_by_group(p, J, ref)
+        if some:  # some rows, not all: the active rows alone were differentiated
+            sl = p.slices["ray_angle"]
+            assert 0 < active["ray_angle"].numel() < sl.stop - sl.start
+
+
+def test_a_ramp_at_exactly_zero_is_active() -> None:
+    # clamp_min's derivative passes at margin = 0: such a row is not quiet; failed rays do not count.
+    from lensopt.optim.residuals import inactive
+
+    valid = torch.tensor([True, True, False])
+    assert inactive(torch.tensor([-1.0, -1e-300, 5.0], dtype=torch.float64), valid)
+    assert not inactive(torch.tensor([-1.0, 0.0, 5.0], dtype=torch.float64), valid)
+    assert not inactive(torch.tensor([-1.0, -0.0, 5.0], dtype=torch.float64), valid)
+    x = torch.tensor([0.0, -1.0, -0.0], dtype=torch.float64)
+    _, dot = torch.func.jvp(lambda v: torch.clamp_min(v, 0.0), (x,), (torch.ones_like(x),))
+    assert dot.tolist() == [1.0, 0.0, 1.0]
