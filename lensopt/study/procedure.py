@@ -11,7 +11,7 @@ basin hopping as the global search beyond it. Library code: no printing; the CLI
 - **Basin hopping** (``"basin"``): round 0 is a multi-start round; from round 1 on, chain c (one per
   start slot) starts from its current lens perturbed by ``hop_sigma`` (monotonic basin hopping: a hop is
   kept when its final merit is lower, Leary 2000), so the local solver LM explores the neighbourhood
-  of the best basins instead of the crude start's.
+  of the best basins instead of the crude start's. A hop runs at full weight (``--full-weight``).
 - **Agreement** (the stated stopping rule): after each round, the run stops when at least
   ``agree_count`` finished starts reached a final merit within ``agree`` (relative) of the best one —
   the best basin was found more than once. Otherwise it stops after ``rounds`` rounds or when the
@@ -81,9 +81,11 @@ class ProcedureSettings:
     esr_sampling: str = "rings:24"
 
     def task_settings(self, hop: bool) -> Settings:
-        """The sweep settings one start runs with (a hop perturbs by ``hop_sigma``)."""
+        """The sweep settings one start runs with. A hop perturbs by ``hop_sigma`` and runs at full weight: it
+        continues a chain's lens, whose glasses are bound, so the spec's weight schedules (constraints light
+        while the glasses are free) would let it settle outside the constraints and lose to the chain."""
         return Settings(starts=1, sigma=self.hop_sigma if hop else self.sigma, floor=self.floor, steps=self.steps,
-                        seed=self.seed, esr_sampling=self.esr_sampling)
+                        seed=self.seed, esr_sampling=self.esr_sampling, full_weight=hop)
 
 
 @dataclass(frozen=True)

@@ -62,6 +62,8 @@ class Settings:
         steps: optimizer steps (None: the spec's ``optimize.steps``).
         seed: pupil jitter seed of ``optimize`` and first word of the perturbation seed.
         esr_sampling: pupil sampling of the reported ESR (``lensopt optimize`` reports gauss:16).
+        full_weight: no weight schedules, every constraint group at its final weight from the first step
+            (``lensopt optimize --full-weight``): how a basin hop continues a lens whose glasses are bound.
     """
 
     starts: int = 1
@@ -70,6 +72,7 @@ class Settings:
     steps: int | None = None
     seed: int = 0
     esr_sampling: str = "gauss:16"
+    full_weight: bool = False
 
 
 @dataclass(frozen=True)
@@ -199,7 +202,8 @@ def run_task(settings: Settings, task: Task, *, engine: Engine | None = None) ->
         spec = parse_spec(json.loads(task.spec_json))
         try:
             start_spec = perturbed_spec(spec, task.point, task.start, settings, engine=engine)
-            result = optimize(start_spec, steps=settings.steps, seed=settings.seed, engine=engine)
+            result = optimize(start_spec, steps=settings.steps, seed=settings.seed, full_weight=settings.full_weight,
+                              engine=engine)
             if result.interrupted:  # Ctrl-C in a serial run: the start is not finished
                 raise KeyboardInterrupt
             merit, physical, reason, esr_opt = _final_merit(result.spec, settings, engine=engine)
@@ -217,12 +221,12 @@ def run_task(settings: Settings, task: Task, *, engine: Engine | None = None) ->
         torch.set_num_threads(threads)
 
 
-def optimize(spec: LensSpec, *, steps: int | None, seed: int,
+def optimize(spec: LensSpec, *, steps: int | None, seed: int, full_weight: bool = False,
              engine: Engine | None = None):  # noqa: ANN201 - design.optimize, by name
     """``lensopt.design.optimize`` (a module-level name, so that tests can count the calls)."""
     from lensopt.design import optimize as run_optimize
 
-    return run_optimize(spec, steps=steps, seed=seed, engine=engine)
+    return run_optimize(spec, steps=steps, seed=seed, full_weight=full_weight, engine=engine)
 
 
 def _final_merit(spec: LensSpec, settings: Settings, *, engine: Engine | None = None) -> tuple[float, bool, str, float]:

@@ -75,15 +75,28 @@ def test_agreement_rule_and_grouping_on_records() -> None:
     assert [(g["best"], g["count"]) for g in groups] == [("0_0", 2), ("0_2", 1), ("0_3", 1)]
 
 
-def test_basin_hopping_starts_from_the_best_and_keeps_only_better_hops(tmp_path: Path) -> None:
+def test_basin_hopping_starts_from_the_best_and_keeps_only_better_hops(tmp_path: Path,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    import lensopt.study.sweep as sw
+
     path, text = _spec(tmp_path)
     spec = load_spec(path)
     out = tmp_path / "basin"
     st = ProcedureSettings(method="basin", starts=2, rounds=3, steps=3, hop_sigma=0.02, agree=1e-12,
                            esr_sampling="rings:3")
+    weights: list[bool] = []
+    real = sw.optimize
+
+    def recording(spec, **kw):  # noqa: ANN001, ANN202
+        weights.append(kw["full_weight"])
+        return real(spec, **kw)
+
+    monkeypatch.setattr(sw, "optimize", recording)
     res = run_procedure(spec, text, st, out)
     by = {r["name"]: r for r in res.records}
     assert set(by) == {"0_0", "0_1", "1_1", "2_1", "1_2", "2_2"}
+    # Round 0's starts run the spec's schedules; the four hops continue bound lenses at full weight.
+    assert weights == [False, False, True, True, True, True]
     # Round 0's two starts seed the chains, best first; a hop's lens is the chain's lens in the next
     # round only when its merit is lower (the hop's start lens is the perturbed chain lens).
     first = sorted(["0_0", "0_1"], key=lambda n: by[n]["merit"])
