@@ -7,6 +7,14 @@ each requirement's margin, so that the constraints active at the optimum show.
     PYTHONPATH=. python benchmarks/optimize/cmount_multistart.py out/cm_s05 out/cm_s20 …
 
 Writes benchmarks/optimize/results_cmount_multistart.json and prints one line per start.
+
+``--design`` compares global searches at equal CPU time (issue 25 item 3): ``lensopt design`` folders of the
+same spec, one per method, each run to the same ``--budget-cpu-h``; per folder the method, CPU time, starts,
+the best start's merit and ESR, and S6.1 on the dense sample for the best lens (key ``global_search``):
+
+    lensopt design specs/cmount_4p.toml -o out/cm_ms --method multistart --starts 2 --rounds 50 \
+        --agree-count 1000 --budget-cpu-h 0.3 --scheduler serial --seed 0      # and --method basin -o out/cm_bh
+    PYTHONPATH=. python benchmarks/optimize/cmount_multistart.py --design out/cm_ms out/cm_bh
 """
 
 from __future__ import annotations
@@ -73,10 +81,40 @@ def main(folders: list[str]) -> None:
         for c in out["best"]["requirements"]:
             print(f"  {c['name']}: {c['value']} ({c['limit']})")
     path = ROOT / "benchmarks" / "optimize" / "results_cmount_multistart.json"
-    if path.exists() and "relax" in (old := json.loads(path.read_text())):
-        out["relax"] = old["relax"]  # cmount_relax.py's runs share this record
+    old = json.loads(path.read_text()) if path.exists() else {}
+    for key in ("relax", "global_search"):  # cmount_relax.py's runs and --design share this record
+        if key in old:
+            out[key] = old[key]
     path.write_text(json.dumps(out, indent=1, ensure_ascii=False) + "\n")
 
 
+def design_runs(folders: list[str]) -> None:
+    """The ``--design`` comparison (module doc) into results_cmount_multistart.json's ``global_search``."""
+    runs = []
+    for folder in folders:
+        doc = json.loads((Path(folder) / "design.json").read_text())
+        starts = [r for r in doc["starts"] if r.get("status") == "finished"]
+        best = min(starts, key=lambda r: r["merit"])
+        checks = lens_checks(Path(folder) / "points" / f"{best['name']}.lens.json")
+        hops = [r for r in starts if r.get("round", 0) > 0]
+        runs.append({"folder": folder, "method": doc["settings"]["method"], "settings": doc["settings"],
+                     "cpu_s": doc["cpu_s"], "stop_reason": doc["stop_reason"], "starts": len(doc["starts"]),
+                     "finished": len(starts), "best": best["name"], "best_merit": best["merit"],
+                     "best_esr_um": best.get("esr_um"), "best_seed_esr_um": best.get("seed_esr_um"),
+                     "best_requirements_failed": checks["requirements_failed"], "glasses": checks["glasses"],
+                     "minima": [{k: m.get(k) for k in ("merit", "esr_um", "count")} for m in doc["minima"]],
+                     "merits": [r["merit"] for r in starts], "later_round_merits": [r["merit"] for r in hops]})
+        r = runs[-1]
+        print(f"{r['method']}: {r['cpu_s']:.0f} CPU s, {r['starts']} starts, best {r['best']} merit "
+              f"{r['best_merit']:.6e}, ESR {r['best_esr_um']:.3f} µm, S6.1 failed {r['best_requirements_failed']}")
+    path = ROOT / "benchmarks" / "optimize" / "results_cmount_multistart.json"
+    old = json.loads(path.read_text())
+    old["global_search"] = runs
+    path.write_text(json.dumps(old, indent=1, ensure_ascii=False) + "\n")
+
+
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    if sys.argv[1:2] == ["--design"]:
+        design_runs(sys.argv[2:])
+    else:
+        main(sys.argv[1:])
