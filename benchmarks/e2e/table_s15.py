@@ -343,7 +343,7 @@ def evaluate(work: Path, files: dict[str, Path], a: argparse.Namespace) -> dict[
             if (work / ck).exists() and (n != "restored" or a.joint_steps in (None, a.steps))]
     if (work / "ck_restored_irm").exists():
         todo.append(("restored_lens_irm", work / "restored.json", "ck_restored_irm"))
-    if (work / "ck_restored_polished").exists():
+    if a.polish and (work / "ck_restored_polished").exists():
         todo.append(("restored_polished", work / "restored_polished.json", "ck_restored_polished"))
     for seed in a.joint_seeds:
         if (work / f"ck_restored_seed{seed}").exists():
