@@ -7,6 +7,13 @@ Run:  PYTHONPATH=. OMP_NUM_THREADS=1 .venv/bin/python benchmarks/tolerance/toler
           [--out benchmarks/tolerance/results_tolerance_cmount.json]
 
 Prints a Markdown section (for benchmarks/README.md) and writes the numbers as JSON.
+
+``--irm TRIALS`` instead (issue 27): ``lensopt tolerance`` of the shipped restored C-mount lens with its
+shipped network (``lenses/cmount_4p_restored.json``, ``lenses/networks/cmount_4p_restored``), S6.2 profile, the
+``psnr`` metric after restoration, sensitivities and TRIALS Monte-Carlo trials, serial; the CDF and histogram
+(S6.2's figure: PSNR after restoration over the trials) in ``--irm-dir``; its CPU time; key ``irm`` of ``--out``.
+
+    PYTHONPATH=. OMP_NUM_THREADS=1 .venv/bin/python benchmarks/tolerance/tolerance_cmount.py --irm 20
 """
 
 from __future__ import annotations
@@ -71,6 +78,35 @@ def speed(model, rings: int, trials: int, loop_trials: int, compiled: bool) -> d
     return row
 
 
+def irm_study(trials: int, out_dir: Path) -> dict:
+    """``lensopt tolerance --irm`` on the shipped restored C-mount and its network (see the module doc)."""
+    import math
+    import resource
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "lensopt", "tolerance", "lenses/cmount_4p_restored.json", "--profile", "s6.2",
+           "--irm", "lenses/networks/cmount_4p_restored", "--trials", str(trials), "--scheduler", "serial",
+           "--seed", "0", "--json", "-o", str(out_dir)]
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(ROOT))
+    cpu0, t0 = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
+    r = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT)
+    wall, cpu1 = time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_CHILDREN)
+    if r.returncode != 0:
+        raise SystemExit(f"failed (exit {r.returncode}): {r.stderr[-1000:]}")
+    rep = json.loads(r.stdout)
+    mc = rep["monte_carlo"]
+    numbers = [rep["nominal"]["psnr_pre_db"], rep["nominal"]["psnr_post_db"], *mc["stats"].values(),
+               *[y["value"] for y in mc["yields"]]]
+    sens = rep.get("sensitivity") or []
+    return {"command": " ".join(["lensopt", *cmd[3:]]), "trials": trials, "nominal": rep["nominal"],
+            "stats": mc["stats"], "yields": mc["yields"], "seconds_per_trial": mc["seconds_per_trial"],
+            "sensitivity": sens, "figures": sorted(p.name for p in out_dir.iterdir()) if out_dir.exists() else [],
+            "all_finite": all(isinstance(v, (int, float)) and math.isfinite(v) for v in numbers),
+            "wall_s": wall, "cpu_s": (cpu1.ru_utime + cpu1.ru_stime) - (cpu0.ru_utime + cpu0.ru_stime),
+            "load_after": os.getloadavg()}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--sampling", default="rings:12")
@@ -79,7 +115,17 @@ def main() -> None:
     ap.add_argument("--loop-trials", type=int, default=10)
     ap.add_argument("--compiled", action="store_true", help="also time the torch.compile'd batched evaluation")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "tolerance" / "results_tolerance_cmount.json"))
+    ap.add_argument("--irm", type=int, default=0, metavar="TRIALS",
+                    help="only the restored C-mount with its network (see the module doc), TRIALS trials")
+    ap.add_argument("--irm-dir", type=Path, default=ROOT / "out" / "tolerance_irm", help="figures of --irm")
     args = ap.parse_args()
+    if args.irm:
+        out = Path(args.out)
+        result = json.loads(out.read_text()) if out.exists() else {}
+        result["irm"] = irm_study(args.irm, args.irm_dir)
+        out.write_text(json.dumps(result, indent=2) + "\n")
+        print(json.dumps({k: v for k, v in result["irm"].items() if k != "sensitivity"}, indent=1))
+        return
     load0 = os.getloadavg()
     model = build(load_spec(ROOT / "lenses" / "cmount_4p.json"))
     job = _job(model, args.sampling)

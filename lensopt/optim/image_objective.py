@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -26,7 +27,7 @@ from lensopt.analysis.psf_stack import select_wavelengths
 from lensopt.engine import Engine
 from lensopt.errors import LensoptError
 from lensopt.imaging.camera import Camera
-from lensopt.imaging.datasets import DeadLeaves, ImageFolder, sample_batch
+from lensopt.imaging.datasets import DeadLeaves, sample_batch
 from lensopt.imaging.metrics import psnr_of_mse
 from lensopt.imaging.plan import lens_colour
 from lensopt.imaging.regions import stratified_draw, tile_grid
@@ -40,6 +41,7 @@ from lensopt.imaging.render import (
     trace_spots,
 )
 from lensopt.imaging.scene import Region, Sensor
+from lensopt.imaging.sources import training_sources
 from lensopt.optics.lens import Lens
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling
@@ -94,12 +96,11 @@ class ImageObjective:
         self.channel_weights = cw[self.keep]
         self.tiles = tile_grid(self.sensor, image.patch, option="optimize.image.patch")
         if image.images is None:
-            self.train: DeadLeaves | ImageFolder = DeadLeaves(seed=image.seed)
-            self.held_out: DeadLeaves | ImageFolder = DeadLeaves(seed=image.seed + 1_000_003)
-        else:
-            opt = "optimize.image.images"
-            self.train = ImageFolder(image.images, split="train", patch=image.patch, option=opt)
-            self.held_out = ImageFolder(image.images, split="val", patch=image.patch, option=opt)
+            self.train: Any = DeadLeaves(seed=image.seed)
+            self.held_out: Any = DeadLeaves(seed=image.seed + 1_000_003)
+        else:  # a named source (procedural | textured | photos | a+b) or a folder, as train-irm --images
+            self.train, self.held_out, _ = training_sources(image.images, image.patch, image.seed,
+                                                            engine=self.engine, option="optimize.image.images")
         self.images: Tensor | None = None
         self.regions: list[Region] = []
         self.target: GtraTarget | None = None

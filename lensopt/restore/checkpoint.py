@@ -20,6 +20,7 @@ from lensopt.checkpoint import (
     flatten_optimizer,
     lens_structure,
     load_checkpoint,
+    save_checkpoint,
     unflatten_optimizer,
 )
 from lensopt.restore.config import RestoreConfig
@@ -29,7 +30,7 @@ NetworkRun = Any
 """A ``restore.train.NetworkRun`` (model, optimizer, generators, step, history); typed loosely here so that
 the training loop can import this module."""
 
-__all__ = ["network_fingerprint", "run_state", "load_run_state", "resume_run", "load_network"]
+__all__ = ["network_fingerprint", "run_state", "load_run_state", "resume_run", "load_network", "ship_network"]
 
 
 def network_fingerprint(spec: Any, net: RestoreConfig) -> str:
@@ -99,3 +100,26 @@ def load_network(path: Path, spec: Any, *, device: torch.device | str = "cpu",
         raise CheckpointError(f"weights do not fit the network: {str(err).splitlines()[0]}", path=option) from None
     model.eval()
     return model, probe
+
+
+SHIPPED_META = ("colour", "lens_structure", "network_config", "settings")
+
+
+def ship_network(src: Path, dst: Path, *, lens: str, dtype: torch.dtype = torch.float16) -> Path:
+    """A trained network as a small checkpoint for ``lensopt restore`` / ``evaluate --irm`` / ``tolerance
+    --irm``: the weights in ``dtype`` (loaded back into the float32 network), no Adam moments, generator
+    states or per-step history (so it cannot be ``--resume``d). Its metadata keep the fingerprint (lens
+    structure + network), colour, network and training settings, and add ``lens`` (the shipped lens it
+    belongs to), ``lens_sha256`` (of the lens JSON it was trained for, also ``lens.json`` in the folder),
+    ``steps``, ``last_validation`` and ``weights_dtype``."""
+    import hashlib
+
+    ck = load_checkpoint(src)
+    meta: dict[str, Any] = {k: ck.meta[k] for k in SHIPPED_META if k in ck.meta}
+    hist = ck.meta.get("history") or []
+    meta.update({"lens": lens, "lens_sha256": hashlib.sha256(ck.lens_json.encode()).hexdigest(), "steps": ck.step,
+                 "last_validation": next((h for h in reversed(hist) if "psnr_restored" in h), None),
+                 "weights_dtype": str(dtype).removeprefix("torch.")})
+    weights = {k: v.to(dtype) if v.is_floating_point() else v for k, v in ck.network.items()}
+    return save_checkpoint(dst, Checkpoint(kind=ck.kind, step=ck.step, lens_json=ck.lens_json, network=weights,
+                                           meta=meta, fingerprint=ck.fingerprint))

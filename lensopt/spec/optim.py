@@ -270,8 +270,9 @@ class ImageSpec(_Model):
         kernel: KDE kernel (S1.4.2).
         diffraction: apply the diffraction heuristic (S1.4.3) to the PSFs.
         noise: σ of the additive Gaussian noise, fraction of the maximum (S3.3.1).
-        images: folder of training images (PNG/JPEG/TIFF/EXR; DIV2K layout or a hash split); absent:
-            procedural dead-leaves scenes.
+        images: training scenes, as ``train-irm --images``: procedural | textured | photos (the bundled
+            training photographs) | a folder of images (DIV2K layout or a hash split) | a mixture
+            ``a+b``; absent: procedural dead-leaves scenes.
         validation: held-out patches used for the PSNR reported at the end.
         seed: seed of scenes, crops, regions and noise.
     """

@@ -48,6 +48,8 @@ def test_raw_objective_runs_and_reports_psnr(tmp_path: Path, make_cooke, optimiz
     ({"image": {"psf_size": 48}}, "optimize.image.psf_size"),
     ({"image": {"psf_size": -3}}, "optimize.image.psf_size"),
     ({"image": {"images": "/nonexistent/folder"}}, "optimize.image.images"),
+    ({"image": {"images": "photo"}}, "optimize.image.images"),  # not a source name (photos), not a folder
+    ({"image": {"images": "photos+photos"}}, "optimize.image.images"),
     ({"sensor": None}, "sensor"),
 ])
 def test_bad_raw_input_is_one_line_naming_the_field(tmp_path: Path, make_cooke, change: dict, field: str) -> None:  # noqa: ANN001
@@ -87,3 +89,18 @@ def test_an_image_folder_trains_and_small_images_are_refused(tmp_path: Path, mak
     else:
         assert r.exit_code == 0, r.output
         assert json.loads(r.stdout)["steps"] == 1
+
+
+def test_a_named_scene_source_trains_the_image_objective(tmp_path: Path, make_cooke) -> None:  # noqa: ANN001
+    # optimize.image.images takes train-irm's --images names: the bundled training photographs here.
+    from lensopt.design import build_problem
+    from lensopt.imaging.sources import PHOTOS_TRAIN
+    from lensopt.spec import load_spec
+
+    start = _write(tmp_path, _raw(make_cooke, images="photos"))
+    train = build_problem(load_spec(start)).image.train
+    assert [p.name for p in train.files] == list(PHOTOS_TRAIN)
+    out = tmp_path / "lens.json"
+    r = runner.invoke(app, ["optimize", str(start), "-o", str(out), "--steps", "1", "--json", "-q"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["steps"] == 1
