@@ -17,6 +17,7 @@ from lensopt.analysis.illumination import relative_illumination_std
 from lensopt.analysis.spot import SpotStats
 from lensopt.optics.bundle import Bundle
 from lensopt.optics.lens import Lens, System
+from lensopt.optics.trace import RayTrace
 
 __all__ = [
     "BIG",
@@ -117,14 +118,19 @@ def ray_path_span_margin(bundle: Bundle, spans: list[tuple[int, int, float, floa
     return torch.stack(out) if out else tz.new_zeros((0, *tz.shape[1:]))
 
 
+def _valid_ramp_rows(res: RayTrace, margin: Tensor) -> Tensor:
+    """ramp(margin) on the valid rays, 0 elsewhere, flattened and scaled by 1/√n_r (S45, S47)."""
+    d = torch.where(res.valid.unsqueeze(0), _ramp(margin), 0.0)
+    return d.reshape(-1) / math.sqrt(res.status.numel())
+
+
 def ray_angle(bundle: Bundle, surfaces: list[int], max_deg: float) -> Tensor:
     """(2 I n_r,) ray angle residuals (S43–S45) at the interfaces ``surfaces``: ramp(cos²θmax − ζ)
     for ζ_I = cos² of incidence and ζ_R = cos² of refraction (negative on TIR)."""
     res = bundle.result
     if not surfaces:
         return res.pos.new_zeros(0)
-    d = torch.where(res.valid.unsqueeze(0), _ramp(ray_angle_margin(bundle, surfaces, max_deg)), 0.0)
-    return d.reshape(-1) / math.sqrt(res.status.numel())
+    return _valid_ramp_rows(res, ray_angle_margin(bundle, surfaces, max_deg))
 
 
 def ray_angle_margin(bundle: Bundle, surfaces: list[int], max_deg: float) -> Tensor:
@@ -143,8 +149,7 @@ def surface_normal(bundle: Bundle, surfaces: list[int], max_deg: float) -> Tenso
     res = bundle.result
     if not surfaces:
         return res.pos.new_zeros(0)
-    d = torch.where(res.valid.unsqueeze(0), _ramp(surface_normal_margin(bundle, surfaces, max_deg)), 0.0)
-    return d.reshape(-1) / math.sqrt(res.status.numel())
+    return _valid_ramp_rows(res, surface_normal_margin(bundle, surfaces, max_deg))
 
 
 def surface_normal_margin(bundle: Bundle, surfaces: list[int], max_deg: float) -> Tensor:
