@@ -22,7 +22,7 @@ import math
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -193,14 +193,18 @@ class DeadLeaves:
     channels: int = 3
     r_min: float = 0.004
     r_max: float = 0.25
+    tag: ClassVar[str] = "dead-leaves"  # the scene seeds' namespace
 
     def scene_seed(self, index: int) -> int:
-        return int.from_bytes(hashlib.sha256(f"dead-leaves:{self.seed}:{index}".encode()).digest()[:8], "little")
+        return int.from_bytes(hashlib.sha256(f"{self.tag}:{self.seed}:{index}".encode()).digest()[:8], "little")
+
+    def render(self, height: int, width: int, *, seed: int) -> torch.Tensor:
+        """One scene of seed ``seed`` (``dead_leaves``; a subclass renders another kind)."""
+        return dead_leaves(height, width, seed=seed, channels=self.channels, r_min=self.r_min, r_max=self.r_max)
 
     def scene(self, index: int, height: int, width: int) -> torch.Tensor:
         """Scene ``index`` rendered at ``height × width``, ``[C, H, W]`` float32."""
-        return dead_leaves(height, width, seed=self.scene_seed(index), channels=self.channels, r_min=self.r_min,
-                           r_max=self.r_max)
+        return self.render(height, width, seed=self.scene_seed(index))
 
     def random_patch(self, patch: int | tuple[int, int], generator: torch.Generator) -> torch.Tensor:
         """A fresh scene (its index drawn from ``generator``) rendered directly at the patch size."""

@@ -21,16 +21,16 @@ van Hateren 1996), which tests measure.
 
 from __future__ import annotations
 
-import hashlib
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
 from lensopt.errors import LensoptError
-from lensopt.imaging.datasets import _check_patch, leaf_geometry
+from lensopt.imaging.datasets import DeadLeaves, leaf_geometry
 
 __all__ = ["TexturedLeaves", "textured_leaves", "pink_noise", "radial_power_slope"]
 
@@ -167,27 +167,13 @@ def textured_leaves(
 
 
 @dataclass(frozen=True)
-class TexturedLeaves:
+class TexturedLeaves(DeadLeaves):
     """Procedural textured scenes: scene ``k`` is ``textured_leaves(..., seed=hash(seed, k))``."""
 
-    seed: int = 0
-    channels: int = 3
-    r_min: float = 0.004
-    r_max: float = 0.25
+    tag: ClassVar[str] = "textured-leaves"
 
-    def scene_seed(self, index: int) -> int:
-        return int.from_bytes(hashlib.sha256(f"textured-leaves:{self.seed}:{index}".encode()).digest()[:8], "little")
-
-    def scene(self, index: int, height: int, width: int) -> torch.Tensor:
-        """Scene ``index`` rendered at ``height × width``, ``[C, H, W]`` float32."""
-        return textured_leaves(height, width, seed=self.scene_seed(index), channels=self.channels, r_min=self.r_min,
-                               r_max=self.r_max)
-
-    def random_patch(self, patch: int | tuple[int, int], generator: torch.Generator) -> torch.Tensor:
-        """A fresh scene (its index drawn from ``generator``) rendered directly at the patch size."""
-        ph, pw = _check_patch(patch)
-        index = int(torch.randint(0, 2**62, (1,), generator=generator))
-        return self.scene(index, ph, pw)
+    def render(self, height: int, width: int, *, seed: int) -> torch.Tensor:
+        return textured_leaves(height, width, seed=seed, channels=self.channels, r_min=self.r_min, r_max=self.r_max)
 
 
 def radial_power_slope(img: torch.Tensor, *, f_lo: float = 0.02, f_hi: float = 0.25) -> float:
