@@ -4,16 +4,20 @@ with, restoring a whole capture tile by tile (``lensopt restore``), and the rest
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 from torch import Tensor
 
 from lensopt.checkpoint import CheckpointError
 from lensopt.engine import Engine
 from lensopt.errors import LensoptError
+from lensopt.imaging.camera import SpectrumData
+from lensopt.imaging.plan import channel_weights
 from lensopt.imaging.scene import Region
 from lensopt.restore.capture import ImagingSetup, imaging_setup, lens_psfs, region_grids
 from lensopt.restore.checkpoint import load_network
@@ -38,7 +42,28 @@ def load_restorer(path: Path, model: Any, *, device: torch.device | str = "cpu",
         raise CheckpointError(f"its network restores {net.config.channels}-channel images, but the lens images in "
                               f"{setup.channels} channels ({setup.colour}); train it again with this lensopt",
                               path=option, got=str(path))
+    trained = trained_colour(ck.lens_json, net.config.channels)
+    mine = setup.channel_weights.detach().cpu().double().numpy()
+    if trained is not None and (trained[0].shape != mine.shape
+                                or not np.allclose(trained[0], mine, rtol=0.0, atol=1e-6)):
+        raise CheckpointError(f"its network was trained with colour weights {trained[1]}, but the lens images with "
+                              f"{setup.colour}; restore through the lens it was trained for, or train it again",
+                              path=option, got=str(path))
     return net, setup, int(im.get("patch", 256))
+
+
+def trained_colour(lens_json: str, channels: int) -> tuple[np.ndarray, str] | None:
+    """(W_w, where it came from) of the lens a checkpoint was trained for (its ``lens.json``), in
+    ``channels`` channels, by the rule every command images with (``imaging.plan.channel_weights``); None
+    when that lens has no spectrum."""
+    spectrum = json.loads(lens_json).get("spectrum")
+    if not spectrum or not spectrum.get("wavelengths_nm"):
+        return None
+    data = SpectrumData(tuple(spectrum["wavelengths_nm"]),
+                        None if spectrum.get("weights") is None else tuple(spectrum["weights"]),
+                        None if spectrum.get("rgb_weights") is None else tuple(map(tuple, spectrum["rgb_weights"])))
+    w, _, source = channel_weights(data, channels, list(data.wavelengths_nm))
+    return w, source
 
 
 def match_channels(image: Tensor, channels: int) -> tuple[Tensor, str | None]:

@@ -20,7 +20,6 @@ from typer.testing import CliRunner
 
 from lensopt.cli.app import app
 from lensopt.imaging.io import ImageInfo, read_image, write_image
-from lensopt.imaging.rgb import rgb_weights_from_spectrum
 from tests.helpers import CMOUNT
 
 runner = CliRunner()
@@ -72,7 +71,7 @@ def chain(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
 
 def test_channels_follow_the_spectrum_rule(chain: dict) -> None:
     sp = chain["data"]["spectrum"]
-    want = rgb_weights_from_spectrum(sp["wavelengths_nm"], sp["weights"]).shape[1]  # the S4.1.2 split: 3
+    want = len(sp["rgb_weights"][0])  # the lens's colour model: its rgb_weights, R, G, B
     meta = json.loads((chain["ck"] / "meta.json").read_text())["meta"]
     assert meta["network_config"]["channels"] == want == meta["colour"]["channels"]
     for name in ("cap", "rest"):

@@ -20,16 +20,21 @@ from lensopt.restore import ConditionedRestorer, RestoreConfig
 from lensopt.restore.apply import match_channels
 from lensopt.restore.capture import imaging_setup
 from lensopt.restore.checkpoint import network_fingerprint
-from lensopt.spec import dump_json, load_spec
+from lensopt.spec import build, dump_json, load_spec
 
 runner = CliRunner()
 
 
 def test_training_channels_follow_the_spectrum_rule(cmount) -> None:
-    # C-mount: 12 wavelengths, no rgb_weights -> RGB by the seed's split (S4.1.2), as simulate renders.
-    spec = cmount.spec.spectrum
-    assert spec.rgb_weights is None and len(spec.wavelengths_nm) == 12
+    # C-mount: 12 wavelengths. With its rgb_weights the network images in them; without, RGB by the seed's
+    # split (S4.1.2), as simulate renders.
     setup = imaging_setup(cmount.camera(), patch=64)
+    np.testing.assert_array_equal(setup.channel_weights.numpy(), np.asarray(cmount.spec.spectrum.rgb_weights))
+    assert setup.describe()["colour"] == "spectrum.rgb_weights"
+    bare = cmount.spec.model_copy(update={"spectrum": cmount.spec.spectrum.model_copy(update={"rgb_weights": None})})
+    spec = bare.spectrum
+    assert spec.rgb_weights is None and len(spec.wavelengths_nm) == 12
+    setup = imaging_setup(build(bare).camera(), patch=64)
     want = rgb_weights_from_spectrum(spec.wavelengths_nm, spec.weights_or_uniform)
     assert setup.channels == 3
     np.testing.assert_allclose(setup.channel_weights.numpy(), want, rtol=0, atol=1e-15)

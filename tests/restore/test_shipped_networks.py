@@ -10,6 +10,7 @@ import hashlib
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 from typer.testing import CliRunner
@@ -17,8 +18,9 @@ from typer.testing import CliRunner
 from lensopt.analysis.requirements import Requirements, check_requirements, failed
 from lensopt.checkpoint import CheckpointError, load_checkpoint
 from lensopt.cli.app import app
+from lensopt.imaging.plan import lens_colour
 from lensopt.restore import RestoreConfig
-from lensopt.restore.apply import load_restorer
+from lensopt.restore.apply import load_restorer, trained_colour
 from lensopt.restore.checkpoint import network_fingerprint
 from lensopt.spec import build, load_spec
 from tests.helpers import imaging_oval
@@ -55,12 +57,15 @@ def test_a_shipped_network_loads_for_its_lens_and_records_it(lens: str) -> None:
     assert ck.fingerprint == network_fingerprint(spec, RestoreConfig.from_dict(ck.meta["network_config"]))
     assert ck.meta["lens"] == f"lenses/{lens}.json"
     assert ck.meta["lens_sha256"] == hashlib.sha256(ck.lens_json.encode()).hexdigest()
-    # The lens it was trained for is the shipped one: same surfaces, to every digit (the spot and raw lenses'
-    # copies add only the restored spec's rgb_weights, which do not touch the geometry).
-    trained = json.loads(ck.lens_json)["surfaces"]
-    shipped = json.loads((ROOT / "lenses" / f"{lens}.json").read_text())["surfaces"]
-    keys = ("type", "radius", "thickness", "material", "stop")
-    assert [[s.get(k) for k in keys] for s in trained] == [[s.get(k) for k in keys] for s in shipped]
+    # The lens it was trained for is the shipped one: the same lens, spectrum and colour model included, to
+    # every digit (the copy trained on adds only its [restore] section).
+    trained = json.loads(ck.lens_json)
+    shipped = json.loads((ROOT / "lenses" / f"{lens}.json").read_text())
+    assert {k: v for k, v in trained.items() if k != "restore"} == {k: v for k, v in shipped.items() if k != "restore"}
+    # One colour model end to end: the channel weights the network was trained in are the shipped lens's.
+    w, source = trained_colour(ck.lens_json, 3)
+    np.testing.assert_array_equal(w, lens_colour(spec.spectrum)[0])
+    assert source == "spectrum.rgb_weights"
     # How it was trained (benchmarks/README.md, Table S15): 200 Adam steps of 4 × 64² crops of the bundled
     # training photographs.
     train = ck.meta["settings"]["train"]
@@ -81,6 +86,23 @@ def test_a_shipped_network_refuses_a_lens_of_another_structure() -> None:
     assert "\n" not in msg
     assert "9 surfaces" in msg and "12 wavelengths" in msg  # the network's lens
     assert "2 surfaces" in msg or "1 surfaces" in msg or "3 wavelengths" in msg  # and this one
+
+
+def test_a_network_refuses_a_lens_with_other_colour_weights(tmp_path: Path) -> None:
+    # The spot lens without its rgb_weights images by the seed's split (S4.1.2): same structure and channel
+    # count, other weights (the split shares 480/510 and 570/600 nm between channels; the network's hard split
+    # does not), so restoring through it would feed the network colours it never saw: one line naming both.
+    data = json.loads((ROOT / "lenses" / "cmount_4p.json").read_text())
+    del data["spectrum"]["rgb_weights"]
+    lens = tmp_path / "no_rgb.json"
+    lens.write_text(json.dumps(data))
+    r = runner.invoke(app, ["evaluate", str(lens), "--irm", str(ROOT / "lenses" / "networks" / "cmount_4p"),
+                            "--count", "1", "--patch", "64"])
+    assert r.exit_code == 2, r.output
+    assert len(r.output.strip().splitlines()) == 1 and "Traceback" not in r.output, r.output
+    assert "trained with colour weights spectrum.rgb_weights" in r.output  # the network's
+    assert "contiguous thirds of the spectrum" in r.output  # and the lens's
+    assert not (tmp_path / "no_rgb.irm").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["no_rgb.json"]
 
 
 @pytest.mark.parametrize("lens", LENSES)
