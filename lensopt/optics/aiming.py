@@ -4,7 +4,10 @@ real ray with the derivative from forward-mode autodiff.
 
 The shift is a relative pupil offset δ (in units of EPD/2) added to every pupil y coordinate. Newton
 runs on detached values; one final step on the attached lens makes δ exactly differentiable in the
-lens parameters at convergence (implicit function theorem), as for the asphere intersection.
+lens parameters at convergence (implicit function theorem), as for the asphere intersection. The
+traces of the final steps (and of ``stop_radius``) take their values from the detached lens and their
+first derivatives from the trace's explicit partials (``attached_stop_hit``): under ``jacfwd`` a few
+linear operations carry the N tangents instead of the whole trace to the stop.
 
 Decentered and tilted lenses (``lens.placement``) and two-dimensional fields: the stop centre is the
 stop surface's own vertex (its frame, ``optics.placement``), hits on the stop are measured in that
@@ -24,11 +27,12 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from lensopt.optics.differential import LEAVES, stop_partials
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.placement import surface_frames, to_local
 from lensopt.optics.sampling import launch
-from lensopt.optics.trace import RayTrace, lens_tensors, trace
+from lensopt.optics.trace import Rays, RayTrace, lens_tensors, trace
 from lensopt.optics.transforms import all_settled, carries_derivatives
 
 __all__ = ["ChiefAim", "aim_chief", "PupilAim", "aim_full", "stop_radius", "stop_hit"]
@@ -82,6 +86,30 @@ def stop_hit(lens: Lens, rays) -> tuple[Tensor, Tensor, RayTrace]:
     return x, y, hit
 
 
+def attached_stop_hit(lens: Lens, rays: Rays) -> tuple[Tensor, Tensor, RayTrace]:
+    """``stop_hit`` for the attached final steps of the aiming solves: the values of the plain trace of
+    the detached lens and rays (the same bits), the first derivatives those of the trace (to rounding)
+    by its explicit partials in the lens tensors and the rays (``differential.stop_partials``), applied
+    as x + Σ ∂x/∂p (p − p̄) with p̄ the detached p (0 in value). Any mode of differentiation then passes
+    a few linear operations instead of the whole trace to the stop (under ``jacfwd``: N-column dual
+    arithmetic on every operation). A placed lens, or one without derivatives, is traced as it is."""
+    if lens.placement is not None or not carries_derivatives(*lens_tensors(lens), rays.pos, rays.dir):
+        return stop_hit(lens, rays)
+    detached = _detach_lens(lens)
+    pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
+    plain = Rays(pos.detach(), dir.detach(), rays.wavelength)
+    x, y, hit = stop_hit(detached, plain)
+    partials = stop_partials(detached, plain)[..., :2, :]  # (*B, 2, 6 + L)
+    keep = hit.valid[..., None, None] & torch.isfinite(partials)  # a lost ray's values are not used
+    partials = torch.where(keep, partials, torch.zeros_like(partials))
+    moved = torch.cat([pos, dir], -1)
+    moved = moved - moved.detach()
+    leaves = torch.cat([getattr(lens, name).reshape(-1) for name in LEAVES])
+    leaves = leaves - leaves.detach()
+    lin = (partials[..., :6] @ moved.unsqueeze(-1)).squeeze(-1) + partials[..., 6:] @ leaves
+    return x + lin[..., 0], y + lin[..., 1], hit
+
+
 def aim_chief(
     lens: Lens,
     system: System,
@@ -126,7 +154,10 @@ def aim_chief(
     # theorem, with the solve's slope). Without derivatives the attached trace is the detached one
     # (same values): skipped.
     if carries_derivatives(*lens_tensors(lens), tan_field, epd, entrance_pupil_z):
-        y, valid = stop_y(delta, lens, tan_field, epd, entrance_pupil_z)
+        pupil = torch.stack([torch.zeros_like(delta), delta], -1).unsqueeze(-2)
+        _, y, hit = attached_stop_hit(lens, launch(lens, system, pupil, tan_field, epd=epd,
+                                                   entrance_pupil_z=entrance_pupil_z))
+        y, valid = y[..., 0], hit.valid[..., 0]
     else:
         y, valid = solve.y, solve.valid
     offset = torch.where(ok, delta - y / slope, delta)
@@ -301,7 +332,7 @@ def stop_radius(lens: Lens, system: System, *, epd: Tensor, entrance_pupil_z: Te
     pupil = torch.zeros(1, lens.wavelength_um.shape[0], 1, 2, dtype=lens.dtype, device=lens.device)
     pupil[..., 1] = 1.0
     tan0 = torch.zeros(1, dtype=lens.dtype, device=lens.device)
-    _, y, hit = stop_hit(lens, launch(lens, system, pupil, tan0, epd=epd, entrance_pupil_z=entrance_pupil_z))
+    _, y, hit = attached_stop_hit(lens, launch(lens, system, pupil, tan0, epd=epd, entrance_pupil_z=entrance_pupil_z))
     real = y[0, ref, 0].abs()
     return torch.where(hit.valid[0, ref, 0], real, first_order(lens, system).stop_semi_diameter)
 
@@ -370,8 +401,8 @@ def aim_full(
         pupil = torch.stack([torch.stack([zero, sets[..., 0]], -1), torch.stack([zero, sets[..., 1]], -1),
                              torch.stack([sets[..., 2] + zero, y0.unsqueeze(-1).expand_as(zero)], -1)], -2)
         num_f, num_w, k = sets.shape[:3]
-        x, y, hit = stop_hit(lens_, launch(lens_, system, pupil.reshape(num_f, num_w, 3 * k, 2), tan_, epd=epd_,
-                                           entrance_pupil_z=ep_z))
+        rays = launch(lens_, system, pupil.reshape(num_f, num_w, 3 * k, 2), tan_, epd=epd_, entrance_pupil_z=ep_z)
+        x, y, hit = attached_stop_hit(lens_, rays)
         x, y, valid = (t.reshape(num_f, num_w, k, 3) for t in (x, y, hit.valid))
         rho = torch.sqrt((x[..., 2] ** 2 + y[..., 2] ** 2).clamp_min(torch.finfo(u.dtype).tiny))
         g = torch.stack([y[..., 0], y[..., 1], rho], -1)

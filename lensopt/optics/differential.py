@@ -51,7 +51,7 @@ from lensopt.optics.trace import (
     surface_step,
 )
 
-__all__ = ["supported", "trace_with_tangents", "HIT_FIELDS"]
+__all__ = ["supported", "trace_with_tangents", "HIT_FIELDS", "LEAVES", "stop_partials"]
 
 
 def supported(lens: Lens) -> bool:
@@ -245,7 +245,7 @@ _SIDE_ROWS = {"pos": (6, 7, 8), "dir_out": (9, 10, 11), "normal": (12, 13, 14), 
 
 def trace_with_tangents(lens: Lens, rays: Rays, lens_dot: Lens, rays_dot: Rays, *,
                         hit_fields: Callable[[RayTrace], Collection[str]] | Collection[str] = HIT_FIELDS,
-                        ) -> tuple[RayTrace, RayTrace]:
+                        upto: int | None = None) -> tuple[RayTrace, RayTrace]:
     """``trace(lens, rays, record=True)`` and its tangents.
 
     Args:
@@ -256,6 +256,9 @@ def trace_with_tangents(lens: Lens, rays: Rays, lens_dot: Lens, rays_dot: Rays, 
             of the traced ``RayTrace`` that says which (e.g. more when some ray failed). The others are
             not computed (None in the tangent hits): most of the cost of a trace's derivatives is
             carrying per-surface records that the residual terms do not read.
+        upto: trace surfaces 0 … ``upto`` only (no image step; e.g. the stop): then ``pos``/``dir`` are
+            the rays leaving surface ``upto`` (``hits[upto].pos`` their hits on it, as ``trace(…,
+            upto=upto)`` returns them where the ray reached it), and ``failed_at`` is None.
 
     Returns:
         The ``RayTrace`` (the values of ``trace``: the same step function) and its tangents as a
@@ -278,7 +281,8 @@ def trace_with_tangents(lens: Lens, rays: Rays, lens_dot: Lens, rays_dot: Rays, 
     lam_mm = lens.wavelength_um[wl] * 1e-3 if any(s.diffractive for s in lens.shapes) else None
     # Pass 1: the trace itself, keeping what each step saw.
     steps = []
-    for s, shape in enumerate(lens.shapes):
+    shapes = lens.shapes if upto is None else lens.shapes[: upto + 1]
+    for s, shape in enumerate(shapes):
         media = (lens.index[s][wl], inv_index[s + 1][wl])
         geo = SurfaceGeometry(lens.curvature[s], lens.conic[s], lens.asphere[s], lens.phase[s], vertex[s],
                               lens.semi_diameter[s])
@@ -286,13 +290,16 @@ def trace_with_tangents(lens: Lens, rays: Rays, lens_dot: Lens, rays_dot: Rays, 
                                       StepMode(shape, record=True))
         steps.append((ray, media, geo, rec, book.ok))
         ray = new
-    new, book = image_step(vertex[-1], None, ray, book, lens.num_surfaces)
+    if upto is None:
+        new, book = image_step(vertex[-1], None, ray, book, lens.num_surfaces)
+    else:
+        new = ray
     x, y, z, dx, dy, dz = new
     result = RayTrace(pos=torch.stack([x, y, z], -1), dir=torch.stack([dx, dy, dz], -1), status=book.status.long(),
                       backtrack=book.backtrack > 0,
                       hits=tuple(SurfaceHit(*(torch.stack(v, -1) for v in rec[:4]), *rec[4:7])
                                  for _, _, _, rec, _ in steps),
-                      failed_at=book.failed_at.long())
+                      failed_at=book.failed_at.long() if upto is None else None)
     wanted = set(hit_fields(result) if callable(hit_fields) else hit_fields)
     side = sorted(r for f in wanted - {"dir_in"} for r in _SIDE_ROWS[f])
     # Pass 2: the tangents, surface by surface.
@@ -304,7 +311,8 @@ def trace_with_tangents(lens: Lens, rays: Rays, lens_dot: Lens, rays_dot: Rays, 
 
     def cut(rows_of: tuple[int, ...], tout: Tensor) -> Tensor:
         """The tangents of one field from the chained rows, (*B, 3, N) or (*B, N)."""
-        t = tout[:, [side.index(r) for r in rows_of]]
+        first = side.index(rows_of[0])  # a field's rows are consecutive in ``side``: a view, no copy
+        t = tout[:, first:first + len(rows_of)]
         return t.reshape(*batch, 3, N) if len(rows_of) == 3 else t.reshape(*batch, N)
 
     hit_dots = []
@@ -328,7 +336,36 @@ def trace_with_tangents(lens: Lens, rays: Rays, lens_dot: Lens, rays_dot: Rays, 
         hit_dots.append(SurfaceHit(**{f: (dir_in if f == "dir_in" else cut(_SIDE_ROWS[f], tside))
                                       if f in wanted else None for f in sorted(HIT_FIELDS)}))
         tray = tout
-    tray = _chain(_image_local(ray, book.ok, vertex[-1], 7), tray, 6, vertex_dot[-1][None])
+    if upto is None:
+        tray = _chain(_image_local(ray, book.ok, vertex[-1], 7), tray, 6, vertex_dot[-1][None])
     dot = replace(result, pos=tray[:, 0:3].reshape(*batch, 3, N), dir=tray[:, 3:6].reshape(*batch, 3, N),
                   hits=tuple(hit_dots))
     return result, dot
+
+
+LEAVES = ("curvature", "conic", "asphere", "phase", "thickness", "index")
+"""The lens tensors a trace is differentiated in (``stop_partials``'s columns after the ray's six, in
+this order, each flattened)."""
+
+
+def stop_partials(lens: Lens, rays: Rays) -> Tensor:
+    """(*B, 3, 6 + L) first derivatives of the hits of ``rays`` on the stop (``trace(lens, rays,
+    upto=lens.stop)``'s positions) with respect to each ray's own position and direction (6 columns)
+    and to the L elements of the lens tensors ``LEAVES`` (flattened, in that order): one differential
+    trace of the rays to the stop with those inputs as its tangent columns. Values of ``lens`` and
+    ``rays`` only (no derivatives through them); a lens on its axis (``supported``)."""
+    pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
+    dtype, device = pos.dtype, pos.device
+    leaves = [getattr(lens, name) for name in LEAVES]
+    sizes = [t.numel() for t in leaves]
+    N = 6 + sum(sizes)
+    eye = torch.eye(N, dtype=dtype, device=device)
+    blocks = eye[6:].split(sizes)
+    columns = {name: b.reshape(*t.shape, N) for name, t, b in zip(LEAVES, leaves, blocks, strict=True)}
+    lens_dot = replace(lens, **columns,
+                       wavelength_um=torch.zeros(*lens.wavelength_um.shape, N, dtype=dtype, device=device),
+                       semi_diameter=torch.zeros(*lens.semi_diameter.shape, N, dtype=dtype, device=device))
+    rays_dot = Rays(eye[0:3], eye[3:6], rays.wavelength)
+    _, dot = trace_with_tangents(lens, Rays(pos, dir, rays.wavelength), lens_dot, rays_dot, hit_fields=("pos",),
+                                 upto=lens.stop)
+    return dot.hits[lens.stop].pos

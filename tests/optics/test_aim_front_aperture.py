@@ -156,3 +156,37 @@ def test_held_and_aimed_factors_are_differentiable_in_the_lens() -> None:
     assert bool(torch.isfinite(dy).all())
     assert torch.allclose(dy, fd, rtol=1e-5, atol=1e-8)
     assert float(dy.abs().max()) > 1e-3  # the factors do move with the lens
+
+
+def test_stop_radius_and_chief_offsets_are_differentiable_in_the_lens() -> None:
+    # The stop radius (real axial marginal ray) and the converged chief-ray offsets: forward-mode
+    # derivatives in a thickness and a curvature of element 1 (their attached final steps, with the
+    # trace to the stop differentiated by its explicit partials) against central differences.
+    import dataclasses
+
+    from lensopt.optics.aiming import aim_chief, stop_radius
+
+    m = _model()
+    lens, system = m.lens, m.system
+    rel = torch.tensor(system.rel_field, dtype=F64)
+
+    def f(v: torch.Tensor) -> torch.Tensor:
+        ln = dataclasses.replace(lens, thickness=torch.cat([v[:1], lens.thickness[1:]]),
+                                 curvature=torch.cat([lens.curvature[:1], v[1:], lens.curvature[2:]]))
+        fo = first_order(ln, system)
+        opts = {"epd": fo.epd, "entrance_pupil_z": fo.entrance_pupil_z}
+        chief = aim_chief(ln, system, field_tangents(ln, system, rel), **opts)
+        assert bool(chief.converged.all())
+        return torch.cat([stop_radius(ln, system, **opts).reshape(1), chief.offset.flatten()])
+
+    v0 = torch.stack([lens.thickness[0], lens.curvature[1]])
+    jac = torch.func.jacfwd(f)(v0)
+    for k in range(2):
+        h = 1e-6 * float(v0[k].abs())
+        e = torch.zeros(2, dtype=F64)
+        e[k] = h
+        fd = (f(v0 + e) - f(v0 - e)) / (2 * h)
+        assert bool(torch.isfinite(jac[:, k]).all())
+        assert torch.allclose(jac[:, k], fd, rtol=1e-5, atol=1e-7 * float(fd.abs().max()))
+        assert float(fd[1:].abs().max()) > 1e-4  # the offsets do move with the lens
+    assert float(jac[0].abs().max()) > 1e-3

@@ -115,3 +115,36 @@ def test_a_placed_lens_is_refused() -> None:
     assert not supported(placed)
     with pytest.raises(ValueError, match="placement"):
         trace_with_tangents(placed, rays, lens_dot, rays_dot)
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_attached_stop_hit_is_the_trace_to_the_stop_in_value_and_derivative(case: str) -> None:
+    # The aiming solves' attached final steps trace to the stop through ``attached_stop_hit``: the values
+    # of the plain trace, the derivatives by its explicit partials (``stop_partials``). Reference: the
+    # plain ``stop_hit`` of the attached lens and rays under jacfwd (forward mode through every step).
+    from lensopt.optics.aiming import attached_stop_hit, stop_hit
+
+    path, scale = CASES[case]
+    lens_of, rays_of, theta = _setup(path, scale)
+    lens, rays = lens_of(theta), rays_of(theta)
+    x0, y0, hit0 = stop_hit(lens, rays)
+    x1, y1, hit1 = attached_stop_hit(lens, rays)  # no derivatives: the plain trace itself
+    assert torch.equal(x0, x1) and torch.equal(y0, y1) and torch.equal(hit0.status, hit1.status)
+
+    def via(fn):  # noqa: ANN001, ANN202
+        def f(t):  # noqa: ANN001, ANN202
+            x, y, _ = fn(lens_of(t), rays_of(t))
+            return (x, y), (x, y)
+        return f
+
+    jac_ref, (xr, yr) = torch.func.jacfwd(via(stop_hit), has_aux=True)(theta)
+    jac, (xa, ya) = torch.func.jacfwd(via(attached_stop_hit), has_aux=True)(theta)
+    assert torch.equal(xa, x0) and torch.equal(ya, y0) and torch.equal(xr, x0)  # values keep their bits
+    valid = hit0.valid
+    if case.startswith("Cooke"):
+        assert 0 < int(valid.sum()) < valid.numel()  # some rays are lost before the stop: not compared
+    for want, have in zip(jac_ref, jac, strict=True):
+        want, have = want[valid], have[valid]
+        scale_k = float(want.abs().max())
+        assert scale_k > 0
+        assert float((want - have).abs().max()) <= 1e-12 * scale_k

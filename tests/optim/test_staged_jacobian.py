@@ -125,3 +125,24 @@ def test_a_ramp_at_exactly_zero_is_active() -> None:
     x = torch.tensor([0.0, -1.0, -0.0], dtype=torch.float64)
     _, dot = torch.func.jvp(lambda v: torch.clamp_min(v, 0.0), (x,), (torch.ones_like(x),))
     assert dot.tolist() == [1.0, 0.0, 1.0]
+
+
+def test_staged_jacobian_behind_a_vignetting_front_aperture() -> None:
+    # tests/data/telephoto_vignetted.toml: the front aperture cuts V_i ≈ 0.45 at the edge of the field,
+    # full aiming holds the bottom ray on its edge (4 steps). Its aiming solves' final steps are
+    # differentiated through ``aiming.attached_stop_hit`` in both Jacobians; the staged one must
+    # still equal jacfwd of the whole residual function.
+    data = tomllib.loads((Path(__file__).resolve().parents[1] / "data" / "telephoto_vignetted.toml").read_text())
+    data["system"]["field"]["relative"] = [0.0, 0.6, 1.0]
+    data["optimize"] = {"sampling": "rings:2"}
+    for s in data["surfaces"][:6]:
+        s["vary"] = ["radius", "thickness"] if "radius" in s else ["thickness"]
+    p = build_problem(parse_spec(data))
+    theta = p.theta0 * (1 + 1e-4 * torch.linspace(-1, 1, p.num_variables, dtype=torch.float64))
+    shape = p.launch(p.lens(theta)[0]).shape
+    assert shape.full is not None and bool(shape.full.held.any())  # a held ray: the aperture's edge
+    ref, r_ref = p.jacobian_jacfwd(theta)
+    J, r = p.jacobian(theta)
+    assert torch.equal(r, r_ref)
+    _assert_equal_by_group(p, J, ref)
+    assert float(ref.abs().max()) > 0
