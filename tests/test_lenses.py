@@ -12,7 +12,7 @@ were made for, so that a change to the tracer or the optimizer that would break 
 - ``cmount_4p_raw.json``: the C-mount study's image-driven row (S6.2, Table S15 "raw image quality"),
   LM on GTRA from ``cmount_4p.json`` (``specs/cmount_4p_raw.toml``): higher held-out raw PSNR than the
   spot-optimized lens while its ESR grows, the S6.1 requirements still met, the same real glasses.
-- ``cmount_4p_restored.json``: Table S15's restored row (``benchmarks/e2e/table_s15.py --polish --ship``: 40 joint
+- ``cmount_4p_restored.json``: Table S15's restored row (``benchmarks/e2e/table_s15.py --polish --ship``: 100 joint
   lens + network steps of ``specs/cmount_4p_restored.toml`` from ``cmount_4p.json``, then the raw lens's polish
   to the 2 % distortion limit); S6.1 and its network in ``tests/restore/test_shipped_networks.py``.
 - ``telephoto_5p_tr080.json`` and ``telephoto_5p1_middle_tr075.json``: the seed's telephoto study (S4) and

@@ -1,7 +1,9 @@
 """Time split and peak memory of one joint (lens + network) step, objective = "restored" (S3.3.1).
 
     PYTHONPATH=. OMP_NUM_THREADS=2 python benchmarks/e2e/joint_step.py --batch 16 --patch 256 \
-        --out benchmarks/e2e/results_joint_step_16x256.json
+        --out benchmarks/e2e/results_joint_step_16x256.json --key cpu_2_threads
+    PYTHONPATH=. python benchmarks/e2e/joint_step.py --batch 16 --patch 256 --repeat 3 --device cuda \
+        --out benchmarks/e2e/results_joint_step_16x256.json --key cuda
 
 Lens: the C-mount 4P of lenses/cmount_4p.json with an RGB split of its camera spectrum (see
 ``cmount_rgb_data``), radii and thicknesses varying, glasses fixed. Network: the seed's default
@@ -62,7 +64,10 @@ def main() -> None:
     ap.add_argument("--opt-sampling", default="rings:4", help="[optimize] sampling (constraint rays)")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--key", help="store the result under this key of --out, keeping the file's other runs")
     ap.add_argument("--parts-only", action="store_true", help="no warm-up and no whole joint step (large sizes)")
+    ap.add_argument("--device", default="cpu", help="where the network, patches and rendering live (the lens "
+                    "problem stays on the CPU in float64, as `lensopt optimize --device` runs it)")
     a = ap.parse_args()
     data = cmount_rgb_data()
     data["optimize"] = {**data.get("optimize", {}), "objective": "restored", "sampling": a.opt_sampling,
@@ -72,8 +77,9 @@ def main() -> None:
     spec = parse_spec(data)
     problem = build_problem(spec, method="lm")
     torch.manual_seed(0)
-    net = ConditionedRestorer(RestoreConfig())
-    obj = RestoredObjective(problem.setup.camera, problem.opt.image, net)
+    dev = torch.device(a.device)
+    net = ConditionedRestorer(RestoreConfig()).to(dev)
+    obj = RestoredObjective(problem.setup.camera, problem.opt.image, net, device=dev)
     problem.image = obj
     cfg = TrainConfig()
     adam = network_optimizer(net, cfg)
@@ -90,9 +96,15 @@ def main() -> None:
     times: dict[str, list[float]] = {}
     cpu: dict[str, list[float]] = {}
 
+    def sync() -> None:
+        if dev.type == "cuda":
+            torch.cuda.synchronize(dev)
+
     def timed(name: str, fn):  # noqa: ANN001, ANN202
+        sync()
         t0, c0 = time.perf_counter(), time.process_time()
         out = fn()
+        sync()
         times.setdefault(name, []).append(time.perf_counter() - t0)
         cpu.setdefault(name, []).append(time.process_time() - c0)
         print(f"{name}: wall {times[name][-1]:.2f} s, CPU {cpu[name][-1]:.2f} s, peak RSS {peak_rss_mb():.0f} MB",
@@ -124,8 +136,10 @@ def main() -> None:
         timed("network Adam step (forward, backward, update)",
               lambda: network_step(net, adam, cap, kpsf, obj.images, 1e-4))
         if not a.parts_only:
+            sync()
             t0 = time.perf_counter()
             joint_step(problem, lm, obj, net, adam, k + 1, 10, lr=cfg.lr, lr_min=0.0)
+            sync()
             whole.append(time.perf_counter() - t0)
     med = {k: statistics.median(v) for k, v in times.items()}
     res = {"opt_sampling": a.opt_sampling,
@@ -135,8 +149,16 @@ def main() -> None:
            "threads": torch.get_num_threads(), "repeat": a.repeat, "median_s": med,
            "median_cpu_s": {k: statistics.median(v) for k, v in cpu.items()},
            "joint_step_median_s": statistics.median(whole) if whole else None, "joint_step_s": whole,
-           "rss_after_setup_mb": base_mb, "peak_rss_mb": peak_rss_mb()}
+           "rss_after_setup_mb": base_mb, "peak_rss_mb": peak_rss_mb(), "device": str(dev)}
+    if dev.type == "cuda":
+        res["cuda"] = {"name": torch.cuda.get_device_name(dev), "torch": torch.__version__,
+                       "peak_allocated_mb": torch.cuda.max_memory_allocated(dev) / 2**20,
+                       "peak_reserved_mb": torch.cuda.max_memory_reserved(dev) / 2**20}
     print(json.dumps(res, indent=1))
+    if a.out and a.key:
+        runs = json.loads(a.out.read_text()) if a.out.exists() else {}
+        runs[a.key] = res
+        res = runs
     if a.out:
         a.out.write_text(json.dumps(res, indent=1) + "\n")
 

@@ -10,8 +10,9 @@ The three rows:
 
 Fair comparison: the two ``train-irm`` networks get the same number of Adam steps, batch, patch, PSF
 size, fields, pupil sampling, PSF grid, noise, learning rate and schedule as the joint run's network.
-The spot lens JSON carries no ``rgb_weights``; its copy here gets the restored spec's (the spectrum's
-R/G/B split, which does not touch the geometry) so that all three networks restore 3-channel images.
+Every copy here gets the restored spec's ``rgb_weights`` (the hard R/G/B split of the spectrum, which does
+not touch the geometry; the shipped spot and raw lenses carry the same since 2026-11-28), so that all three
+networks restore the same 3 channels.
 
 Evaluation: ``lensopt evaluate LENS --irm CKPT --noise 0.005 --json`` (before and after restoration) on
 held-out dead-leaves scenes of a seed used by no training source, and on the held-out photographs
@@ -37,6 +38,10 @@ seeds 0, 1, 2 each; ``multi_seed`` in ``--out``), as run on 2026-11-28 in stages
     # (the joint run was stopped at step 40 of 100 with Ctrl-C; --joint-steps 40 records that budget)
     PYTHONPATH=. python benchmarks/e2e/table_s15.py --evaluate-only --steps 200 --joint-steps 40 --images photos \
         --extra-seeds 0 1 2 --polish --polish-seeds 1 2 --parallel 4 --work out/t15
+    # then the joint run resumed to its end (lensopt optimize START --checkpoint out/t15/ck_restored --resume, START
+    # the checkpoint's start_spec, 100 steps), and the restored rows made again from it (the spot/raw rows kept):
+    PYTHONPATH=. python benchmarks/e2e/table_s15.py --skip-main --steps 200 --joint-steps 100 --images photos \
+        --extra-seeds 0 1 2 --polish --polish-seeds 1 2 --work out/t15 --reuse-rows --reuse-from ROWS.json --ship
 
 ``--ship`` writes ``lenses/cmount_4p_restored.json`` and ``lenses/networks/LENS/`` (seed-0 networks, float16).
 
