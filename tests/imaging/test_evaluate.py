@@ -97,7 +97,7 @@ def test_cli_json_and_images_folder(tmp_path: Path) -> None:
     assert out["count"] == 3 and [it["scene"] for it in out["items"]] == ["im0.png", "im1.png", "im2.png"]
     assert 5 < out["psnr_db"] < 60 and 0 < out["ssim"] < 1
     assert {"ring", "radius_rel", "count", "tiles", "psnr_db", "ssim"} <= set(out["rings"][0])
-    assert any("contiguous thirds of the spectrum" in n for n in out["notes"])  # the S4.1.2 rule
+    assert any("channel weights: spectrum.rgb_weights" in n for n in out["notes"])  # the lens's own colour model
 
 
 @pytest.mark.parametrize("args, path", [
