@@ -379,13 +379,13 @@ class Problem:
             plan.append(self.ramp_plan(theta.detach(), lens, bundle))
             return plan[0].fields
 
-        def terms_of(t: Tensor, lens: Lens, bundle: Bundle) -> Tensor:
+        def terms_of(t: Tensor, lens: Lens, bundle: Bundle, cut: Bundle | None) -> Tensor:
             parts = list(self._terms(t, lens, bundle, plan[0].given).values())
-            return torch.cat(parts + ramp_tangent_rows(plan[0], lens, bundle))
+            return torch.cat(parts + ramp_tangent_rows(plan[0], lens, cut))
 
         J, r = staged_jacobian(theta, lens_of=lambda t: self.lens(t)[0],
                                launch_of=lambda lens: self.launch(lens, theta), terms_of=terms_of,
-                               hit_fields=hit_fields, system=self.system)
+                               hit_fields=hit_fields, system=self.system, rays=lambda: plan[0].rays)
         return place_ramp_rows(J, r, self.size, plan[0], {name: sl.start for name, sl in self.slices.items()})
 
     def jacobian_jacfwd(self, theta: Tensor) -> tuple[Tensor, Tensor]:
