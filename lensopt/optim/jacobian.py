@@ -204,7 +204,8 @@ def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_
     def reads(result: RayTrace) -> Collection[str]:
         return hit_fields(lens, finish_bundle(system, start, result))
 
-    result, result_dot = trace_with_tangents(lens, start.rays, lens_dot, start_dot.rays, hit_fields=reads)
+    # The trace's tangents variables first (the layout stage C takes them in: no copy there).
+    result, result_dot = trace_with_tangents(lens, start.rays, lens_dot, start_dot.rays, hit_fields=reads, first=True)
     fl_b, ot_b, rebuild_b = split(result)
     dots_b = tangent_leaves(result, result_dot)
     live_b = [i for i, d in enumerate(dots_b) if d is not None]
@@ -218,7 +219,7 @@ def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_
     if cutting:
         fl_k, ot_k, rebuild_k = split(take_trace(finish_bundle(system, start, result).result,
                                                  None if whole else picked))
-    cut_live = [take_rows(dots_b[i], lead, picked) for i in live_b] if cutting and not whole else []
+    cut_live = [take_rows(dots_b[i], lead, picked, front=1) for i in live_b] if cutting and not whole else []
 
     def stage_c(t: Tensor, *fl: Tensor) -> Tensor:
         lens_c, start_c = rebuild_a(list(fl[:n_a]), list(ot_a))
@@ -241,7 +242,7 @@ def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_
     eye = torch.eye(theta.shape[0], dtype=theta.dtype, device=theta.device)
     # Variables first, each sample contiguous like its primal: jvp then takes the tangents as they are
     # (another layout is copied into fresh zeros, tangent by tangent).
-    tangents = tuple(t.movedim(-1, 0).contiguous() for t in (eye, *dots_a, *(dots_b[i] for i in live_b), *cut_live))
+    tangents = (*(t.movedim(-1, 0).contiguous() for t in (eye, *dots_a)), *(dots_b[i] for i in live_b), *cut_live)
 
     def push(*tan: Tensor) -> tuple[Tensor, Tensor]:
         return torch.func.jvp(stage_c, primals, tan)
