@@ -31,7 +31,8 @@ from lensopt.optics.differential import trace_with_tangents
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.trace import RayTrace
 
-__all__ = ["split", "tangent_leaves", "staged_jacobian", "RampRows", "RampPlan", "take_rays", "place_ramp_rows"]
+__all__ = ["split", "tangent_leaves", "staged_jacobian", "RampRows", "RampPlan", "take_rays", "take_trace", "take_rows",
+           "place_ramp_rows"]
 
 
 @dataclass(frozen=True)
@@ -68,30 +69,39 @@ class RampPlan:
     fields: frozenset[str]
 
 
+def take_rows(x: Tensor | None, lead: torch.Size, rays: Tensor | None, front: int = 0) -> Tensor | None:
+    """``x`` (*F, *lead, *tail) (``front`` = len(F) leading dimensions, e.g. the variables of a tangent)
+    with its ``lead`` dimensions flattened and cut to ``rays`` (K,) (flat indices; None: all, in order,
+    a view), as (*F, 1, 1, K, *tail); None stays None."""
+    if x is None:
+        return None
+    head, tail = x.shape[:front], x.shape[front + len(lead):]
+    flat = x.reshape(*head, lead.numel(), *tail)
+    if rays is not None:
+        flat = flat.index_select(front, rays)
+    return flat.reshape(*head, 1, 1, -1, *tail)
+
+
+def take_trace(result: RayTrace, rays: Tensor | None) -> RayTrace:
+    """``result`` cut to the rays ``rays`` (``take_rows``): batch (1, 1, K)."""
+    take = lambda x: take_rows(x, result.status.shape, rays)  # noqa: E731
+    hits = tuple(type(h)(**{f.name: take(getattr(h, f.name)) for f in dataclasses.fields(h)}) for h in result.hits)
+    return RayTrace(take(result.pos), take(result.dir), take(result.status), take(result.backtrack), hits,
+                    take(result.failed_at))
+
+
 def take_rays(bundle: Bundle, rays: Tensor) -> Bundle:
     """``bundle`` with its trace cut to the rays ``rays`` (K,) (flat F·W·P indices), batch (1, 1, K): what
     the margins of ramp terms read (the hits and the end of the trace); the rest is ``bundle``'s."""
-    res = bundle.result
-    lead = res.status.shape
-    n = res.status.numel()
-
-    def take(x: Tensor | None) -> Tensor | None:
-        if x is None:
-            return None
-        tail = x.shape[len(lead):]
-        return x.reshape(n, *tail).index_select(0, rays).reshape(1, 1, -1, *tail)
-
-    hits = tuple(type(h)(**{f.name: take(getattr(h, f.name)) for f in dataclasses.fields(h)}) for h in res.hits)
-    cut = RayTrace(take(res.pos), take(res.dir), take(res.status), take(res.backtrack), hits, take(res.failed_at))
-    return dataclasses.replace(bundle, result=cut)
+    return dataclasses.replace(bundle, result=take_trace(bundle.result, rays))
 
 
-def ramp_tangent_rows(plan: RampPlan, lens: Lens, bundle: Bundle) -> list[Tensor]:
-    """The active ramp rows of ``plan`` at ``bundle`` (inside stage C: their derivatives), in order: the
-    margins of the selected rays, as the residual weighs them ((m / √n)·w, ramp and mask passing)."""
+def ramp_tangent_rows(plan: RampPlan, lens: Lens, cut: Bundle | None) -> list[Tensor]:
+    """The active ramp rows of ``plan`` (inside stage C: their derivatives), in order: the margins of the
+    selected rays, as the residual weighs them ((m / √n)·w, ramp and mask passing); ``cut``: the traced
+    bundle cut to the rays ``plan.rays`` (``take_rays``; ``staged_jacobian``'s ``rays``)."""
     if not plan.ramps:
         return []
-    cut = take_rays(bundle, plan.rays)
     return [(r.margin(lens, cut).reshape(-1)[r.pick] / r.sqrt_n) * r.weight for r in plan.ramps]
 
 
@@ -166,13 +176,18 @@ def tangent_leaves(primal: Any, tangent: Any) -> list[Tensor | None]:
 
 
 def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_of: Callable[[Lens], Launch],
-                    terms_of: Callable[[Tensor, Lens, Bundle], Tensor],
-                    hit_fields: Callable[[Lens, Bundle], Collection[str]], system: System) -> tuple[Tensor, Tensor]:
+                    terms_of: Callable[[Tensor, Lens, Bundle, Bundle | None], Tensor],
+                    hit_fields: Callable[[Lens, Bundle], Collection[str]], system: System,
+                    rays: Callable[[], Tensor | None] = lambda: None) -> tuple[Tensor, Tensor]:
     """(J (M, N), ℓ (M,)) at θ by stages A, B, C (module docstring), for the residual function
-    θ ↦ ``terms_of(θ, lens, finish_bundle(system, launch, trace(lens, launch.rays, record=True)))`` with
-    ``lens = lens_of(θ)``, ``launch = launch_of(lens)``; ``hit_fields(lens, bundle)``: the recorded hit
-    fields whose derivatives the terms read (``Term.reads``), at the primal lens and traced bundle (called
-    once, before ``terms_of``). The lens must have no placement (``optics.differential.supported``)."""
+    θ ↦ ``terms_of(θ, lens, bundle, cut)`` with ``lens = lens_of(θ)``, ``launch = launch_of(lens)``,
+    ``bundle = finish_bundle(system, launch, trace(lens, launch.rays, record=True))``;
+    ``hit_fields(lens, bundle)``: the recorded hit fields whose derivatives the terms read
+    (``Term.reads``), at the primal lens and traced bundle (called once, before ``terms_of``);
+    ``rays()`` (called after ``hit_fields``): the rays (K,) (flat F·W·P indices) of ``cut``, the bundle
+    cut to them (``take_rays``; None: ``cut`` is None). The cut is made on the trace and its tangents
+    before stage C (an index copy of plain tensors, not of duals), or is a view when ``rays`` are all
+    the rays in order. The lens must have no placement (``optics.differential.supported``)."""
     holder: dict[str, Any] = {}
 
     def stage_a(t: Tensor) -> tuple[tuple[Tensor, ...], tuple[tuple[Tensor, ...], tuple[Tensor, ...]]]:
@@ -189,25 +204,45 @@ def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_
     def reads(result: RayTrace) -> Collection[str]:
         return hit_fields(lens, finish_bundle(system, start, result))
 
-    result, result_dot = trace_with_tangents(lens, start.rays, lens_dot, start_dot.rays, hit_fields=reads)
+    # The trace's tangents variables first (the layout stage C takes them in: no copy there).
+    result, result_dot = trace_with_tangents(lens, start.rays, lens_dot, start_dot.rays, hit_fields=reads, first=True)
     fl_b, ot_b, rebuild_b = split(result)
     dots_b = tangent_leaves(result, result_dot)
     live_b = [i for i, d in enumerate(dots_b) if d is not None]
     n_a = len(fl_a)
+    # The cut bundle: its trace's leaves (the finished status among them) and the tangents of the live
+    # ones, cut here; stage C takes those as inputs of their own, or views of the whole trace's.
+    picked, lead = rays(), result.status.shape
+    cutting = picked is not None
+    whole = cutting and picked.numel() == lead.numel() and bool(
+        (picked == torch.arange(lead.numel(), device=picked.device)).all())
+    if cutting:
+        fl_k, ot_k, rebuild_k = split(take_trace(finish_bundle(system, start, result).result,
+                                                 None if whole else picked))
+    cut_live = [take_rows(dots_b[i], lead, picked, front=1) for i in live_b] if cutting and not whole else []
 
     def stage_c(t: Tensor, *fl: Tensor) -> Tensor:
         lens_c, start_c = rebuild_a(list(fl[:n_a]), list(ot_a))
         leaves_b = list(fl_b)  # fields without tangents stay the primal's (no term reads them)
-        for i, v in zip(live_b, fl[n_a:], strict=True):
+        for i, v in zip(live_b, fl[n_a:n_a + len(live_b)], strict=True):
             leaves_b[i] = v
-        return terms_of(t, lens_c, finish_bundle(system, start_c, rebuild_b(leaves_b, ot_b)))
+        bundle = finish_bundle(system, start_c, rebuild_b(leaves_b, ot_b))
+        cut = None
+        if cutting:
+            leaves_k = list(fl_k)
+            taken = [take_rows(leaves_b[i], lead, None) for i in live_b] if whole else fl[n_a + len(live_b):]
+            for i, v in zip(live_b, taken, strict=True):
+                leaves_k[i] = v
+            cut = dataclasses.replace(bundle, result=rebuild_k(leaves_k, ot_k))
+        return terms_of(t, lens_c, bundle, cut)
 
     # Duals need storage of their own: broadcast views (a direction shared by a bundle) are copied.
-    primals = tuple(t.contiguous() for t in (theta, *fl_a, *(fl_b[i] for i in live_b)))
+    primals = tuple(t.contiguous() for t in (theta, *fl_a, *(fl_b[i] for i in live_b),
+                                             *(fl_k[i] for i in live_b if cut_live)))
     eye = torch.eye(theta.shape[0], dtype=theta.dtype, device=theta.device)
     # Variables first, each sample contiguous like its primal: jvp then takes the tangents as they are
     # (another layout is copied into fresh zeros, tangent by tangent).
-    tangents = tuple(t.movedim(-1, 0).contiguous() for t in (eye, *dots_a, *(dots_b[i] for i in live_b)))
+    tangents = (*(t.movedim(-1, 0).contiguous() for t in (eye, *dots_a)), *(dots_b[i] for i in live_b), *cut_live)
 
     def push(*tan: Tensor) -> tuple[Tensor, Tensor]:
         return torch.func.jvp(stage_c, primals, tan)

@@ -127,6 +127,17 @@ class Parameterization:
                     raise SpecError("the bezier basis needs the consecutive powers 4, 6, … varied",
                                     path=f"surfaces[{s}].vary", got=asph)
                 self._bezier[s] = bernstein_to_monomial(len(asph), dtype=self.dtype).to(self.device)
+        # θ → prescription values as two whole-vector operations, (θ · mul) / div: exactly t·α, t/α,
+        # t/α^p or t for each variable (×1 and /1 are exact). One operation per variable costs ≈ 15×
+        # more under forward-mode AD (a dual with a plain operand runs through Python meta kernels).
+        self._mul, self._div = [1.0] * n, [1.0] * n
+        for v in self.variables:
+            if v.kind == "thickness":
+                self._mul[v.index] = alpha
+            elif v.kind == "curvature":
+                self._div[v.index] = alpha
+            elif v.kind in ("phase", "asphere"):
+                self._div[v.index] = alpha**v.power
 
     # ---------------------------------------------------------------------------------- structure
 
@@ -196,23 +207,27 @@ class Parameterization:
         asph = [list(row.unbind()) for row in base.asphere] if base.asphere.shape[1] else [[] for _ in range(S)]
         phase = [list(row.unbind()) for row in base.phase] if base.phase.shape[1] else [[] for _ in range(S)]
         index = list(base.index.unbind())
+        like = {"dtype": theta.dtype, "device": theta.device}
+        scaled = theta * torch.tensor(self._mul, **like) / torch.tensor(self._div, **like)
         glass_rows = self.glass_physical(theta)
+        if glass_rows.shape[0]:  # every glass at once (elementwise: the same numbers as one by one)
+            glass_index = hartmann_index(glass_rows[:, 0, None], glass_rows[:, 1, None], glass_rows[:, 2, None],
+                                         base.wavelength_um).unbind()
         g = 0
         for v in self.variables:
-            s, t = v.surface, theta[v.index]
+            s, t = v.surface, scaled[v.index]
             if v.kind == "thickness":
-                thick[s] = t * a
+                thick[s] = t
             elif v.kind == "curvature":
-                curv[s] = t / a
+                curv[s] = t
             elif v.kind == "conic":
                 conic[s] = t
             elif v.kind == "phase":
-                phase[s][(v.power - 2) // 2] = t / a**v.power
+                phase[s][(v.power - 2) // 2] = t
             elif v.kind == "asphere" and s not in self._bezier:
-                asph[s][(v.power - 4) // 2] = t / a**v.power
+                asph[s][(v.power - 4) // 2] = t
             elif v.kind == "glass":
-                x = glass_rows[g]
-                index[s + 1] = hartmann_index(x[0], x[1], x[2], base.wavelength_um)
+                index[s + 1] = glass_index[g]
                 g += 1
         for s, M in self._bezier.items():
             vs = [v for v in self.variables if v.kind == "asphere" and v.surface == s]

@@ -106,6 +106,26 @@ def test_only_the_requested_hit_fields_get_tangents() -> None:
     assert torch.equal(bare.pos, full.pos) and torch.equal(bare.dir, full.dir)
 
 
+@pytest.mark.parametrize("case", list(CASES))
+def test_tangents_variables_first_are_the_same_numbers(case: str) -> None:
+    # ``first=True`` (stage C's layout: (N, *B, …), contiguous) chains each recorded field by itself:
+    # the same bits as the default layout's tangents (held against jacfwd above), moved.
+    path, scale = CASES[case]
+    lens_of, rays_of, theta = _setup(path, scale)
+    lens, rays, lens_dot, rays_dot = _tangents(lens_of, rays_of, theta)
+    for wanted in (HIT_FIELDS, ("dir_in", "t", "normal")):
+        _, dot = trace_with_tangents(lens, rays, lens_dot, rays_dot, hit_fields=wanted)
+        _, top = trace_with_tangents(lens, rays, lens_dot, rays_dot, hit_fields=wanted, first=True)
+        pairs = [(dot.pos, top.pos), (dot.dir, top.dir)]
+        pairs += [(getattr(h, f), getattr(g, f)) for h, g in zip(dot.hits, top.hits, strict=True) for f in HIT_FIELDS]
+        for a, b in pairs:
+            if a is None:
+                assert b is None
+                continue
+            assert b.is_contiguous() and b.shape == (a.shape[-1], *a.shape[:-1])
+            assert torch.equal(b, a.movedim(-1, 0))
+
+
 def test_a_placed_lens_is_refused() -> None:
     from lensopt.optics.placement import no_placement
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
@@ -87,6 +88,29 @@ def test_edge_bounds_follow_the_centre_thickness() -> None:
     lo, hi = p.gap_bounds(p.lens(p.theta0)[0])
     assert lo.tolist() == pytest.approx([0.2, 5.0])
     assert hi[0].item() == pytest.approx(1.8)
+
+
+@pytest.mark.parametrize("override", [False, True])
+def test_edge_bounds_take_the_derivative_of_the_tied_thickness_alone(override: bool) -> None:
+    # glass_ratio 3 on a 3 mm plate: lower bound CT/3 = 1 (above glass_min), upper 3 CT = 9: d/dCT = 1/3
+    # and 3; the air gap's bounds are numbers (derivative 0). A gap's own max (2.5) replaces the tie.
+    data = _plate(ray_path={"glass_min": 0.1, "glass_ratio": 3.0, "air_min": 0.25, "image_min": 5.0})
+    data["surfaces"][0]["thickness"] = 3.0
+    if override:
+        data["optimize"]["constraints"]["ray_path"]["gaps"] = [{"gap": 0, "max": 2.5}]
+    p = build_problem(parse_spec(data))
+    lens = p.lens(p.theta0)[0]
+    one = torch.zeros_like(lens.thickness)
+    one[0] = 1.0
+
+    def bounds(t: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return p.gap_bounds(dataclasses.replace(lens, thickness=lens.thickness + t * one))
+
+    (lo, hi), (dlo, dhi) = torch.func.jvp(bounds, (torch.zeros((), dtype=torch.float64),),
+                                          (torch.ones((), dtype=torch.float64),))
+    assert lo.tolist() == pytest.approx([1.0, 5.0]) and dlo.tolist() == pytest.approx([1.0 / 3.0, 0.0])
+    assert hi[0].item() == pytest.approx(2.5 if override else 9.0)
+    assert dhi.tolist() == pytest.approx([0.0 if override else 3.0, 0.0])
 
 
 def test_distortion_and_failure_terms(make_cooke) -> None:  # noqa: ANN001

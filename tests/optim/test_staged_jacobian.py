@@ -146,3 +146,40 @@ def test_staged_jacobian_behind_a_vignetting_front_aperture() -> None:
     assert torch.equal(r, r_ref)
     _assert_equal_by_group(p, J, ref)
     assert float(ref.abs().max()) > 0
+
+
+def test_rays_cut_before_stage_c_equal_rays_cut_inside() -> None:
+    # ``staged_jacobian(…, rays=)`` cuts the trace and its tangents to the rays before stage C (plain
+    # index copies), or takes views when they are all the rays in order. Either must give the bits of
+    # cutting the dual bundle inside stage C (``take_rays`` there), for a subset, a reordering and all.
+    from lensopt.optim.jacobian import staged_jacobian, take_rays
+
+    p = build_problem(parse_spec(_study("cmount_4p.toml")))
+    theta = p.theta0 * (1 + 1e-4 * torch.linspace(-1, 1, p.num_variables, dtype=torch.float64))
+    n = p.launch(p.lens(theta)[0]).rays.pos.shape[:-1].numel()
+    fields = ("normal", "pos", "cos2_out")
+
+    def read(result):  # noqa: ANN001, ANN202 - the cut trace's differentiated fields, flattened
+        hits = result.hits
+        return torch.cat([result.pos.reshape(-1), result.dir.reshape(-1), hits[1].normal.reshape(-1),
+                          hits[2].pos.reshape(-1), hits[-1].cos2_out.reshape(-1)])
+
+    def jac(rays: torch.Tensor, before: bool) -> tuple[torch.Tensor, torch.Tensor]:
+        def terms_of(t, lens, bundle, cut):  # noqa: ANN001, ANN202
+            if not before:
+                assert cut is None
+                cut = take_rays(bundle, rays)
+            return torch.cat([t * 2.0, read(cut.result)])
+
+        return staged_jacobian(theta, lens_of=lambda t: p.lens(t)[0], launch_of=lambda lens: p.launch(lens),
+                               terms_of=terms_of, hit_fields=lambda lens, bundle: fields, system=p.system,
+                               rays=(lambda: rays) if before else (lambda: None))
+
+    g = torch.Generator().manual_seed(0)
+    for rays in (torch.randperm(n, generator=g)[: n // 3].sort().values, torch.randperm(n, generator=g),
+                 torch.arange(n)):
+        J_in, r_in = jac(rays, before=False)
+        J, r = jac(rays, before=True)
+        assert J.shape == (p.num_variables + rays.numel() * 13, p.num_variables)
+        assert torch.equal(r, r_in) and torch.equal(J, J_in)
+        assert float(J[p.num_variables:].abs().max()) > 0
