@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import torch
 from torch import Tensor
+from torch._C._functorch import is_batchedtensor
 
 from lensopt.optics.differential import LEAVES, stop_partials
 from lensopt.optics.lens import Lens, System
@@ -98,6 +99,10 @@ def attached_stop_hit(lens: Lens, rays: Rays) -> tuple[Tensor, Tensor, RayTrace]
     detached = _detach_lens(lens)
     pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
     plain = Rays(pos.detach(), dir.detach(), rays.wavelength)
+    if any(is_batchedtensor(t) for t in (*lens_tensors(detached), plain.pos, plain.dir)):
+        # Values batched by a vmap (e.g. tolerance trials): the partials' trace has no batching rule for its
+        # in-place products (a per-sample loop); the plain trace is as exact and far cheaper there.
+        return stop_hit(lens, rays)
     x, y, hit = stop_hit(detached, plain)
     partials = stop_partials(detached, plain)[..., :2, :]  # (*B, 2, 6 + L)
     keep = hit.valid[..., None, None] & torch.isfinite(partials)  # a lost ray's values are not used

@@ -168,3 +168,27 @@ def test_attached_stop_hit_is_the_trace_to_the_stop_in_value_and_derivative(case
         scale_k = float(want.abs().max())
         assert scale_k > 0
         assert float((want - have).abs().max()) <= 1e-12 * scale_k
+
+
+def test_attached_stop_hit_under_vmap_is_the_plain_trace_without_a_fallback_loop() -> None:
+    # Lens values batched by a vmap (tolerance trials): the partials' trace has no batching rule for its
+    # in-place products, so ``attached_stop_hit`` traces plainly there: the same numbers as ``stop_hit`` per
+    # sample to rounding, and no "performance drop" warning (torch's per-sample fallback).
+    import warnings
+
+    from lensopt.optics.aiming import attached_stop_hit, stop_hit
+
+    lens_of, rays_of, theta = _setup(*CASES["telephoto (even aspheres, plastics, IR filter)"])
+    thetas = torch.stack([theta, theta * (1 + 1e-3), theta * (1 - 1e-3)])
+
+    def via(fn):  # noqa: ANN001, ANN202
+        return lambda t: fn(lens_of(t), rays_of(t))[:2]
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the fallback's UserWarning would fail here
+        xb, yb = torch.func.vmap(via(attached_stop_hit))(thetas)
+    for k in range(thetas.shape[0]):
+        x, y = via(stop_hit)(thetas[k])
+        # (batched kernels may sum in another order than the per-sample trace: rounding only)
+        torch.testing.assert_close(xb[k], x, rtol=1e-12, atol=1e-12)
+        torch.testing.assert_close(yb[k], y, rtol=1e-12, atol=1e-12)
