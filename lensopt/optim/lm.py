@@ -4,9 +4,10 @@ Each step solves the damped linear least-squares problem (S63)
 
     min_δ ‖ℓ + J δ‖² + λ ‖D δ‖²
 
-as an augmented least-squares system with an SVD-based solver (never the normal equations), so a
-rank-deficient J (variables the merit does not see, or that act alike) gives a finite step instead
-of NaN. D is the running maximum of the column norms of J (S64), started from
+as an augmented least-squares system through one SVD of the scaled J per Jacobian (``DampedSystem``;
+never the normal equations; a rejected step's next λ reuses it), so a rank-deficient J (variables the
+merit does not see, or that act alike) gives a finite step instead of NaN. D is the running maximum of
+the column norms of J (S64), started from
 max(‖J_n‖, ε) (S65). λ is divided by DF after a step that lowers the merit and multiplied by IF
 otherwise; a step whose merit exceeds TF times the current one, or that makes the lens non-physical,
 is rejected (the Jacobian is reused for the next try).
@@ -31,7 +32,7 @@ from torch import Tensor
 
 from lensopt.optim.settings import LMSettings
 
-__all__ = ["Trial", "StepInfo", "LevenbergMarquardt", "damped_step"]
+__all__ = ["Trial", "StepInfo", "LevenbergMarquardt", "DampedSystem", "damped_step"]
 
 MIN_DAMPING = 1e-15
 MAX_DAMPING = 1e100
@@ -82,30 +83,41 @@ def one_thread() -> contextlib.AbstractContextManager[int]:
     return threads(1)
 
 
-def damped_step(J: Tensor, r: Tensor, D: Tensor, damping: float) -> Tensor:
-    """(N,) δ minimising ‖r + J δ‖² + λ‖D δ‖² (S63) through the augmented least-squares system.
+class DampedSystem:
+    """The damped least-squares problem (S63) of one (J, ℓ, D), solved for any λ from one SVD.
 
-    Solved in the scaled variables y = D δ, ``[J D⁻¹; √λ I] y = [−r; 0]`` (SVD-based ``gelsd`` on the
-    CPU, never the normal equations): the columns of J D⁻¹ have comparable norms and the singular
-    values stay ≥ √λ, so a rank-deficient J (two equal columns) still gives a finite step. Zero
-    columns (variables the merit does not see) are left out: their step is exactly 0; so are rows
+    In the scaled variables y = D δ the step solves ``[J D⁻¹; √λ I] y = [−ℓ; 0]``. With the thin SVD
+    J D⁻¹ = U S Vᵀ (computed once) its solution is y = −V diag(s / (s² + λ)) Uᵀ ℓ for every λ (Moré's
+    LM: one factorization per Jacobian, each λ then costs O(N²)), never the normal equations: a
+    rank-deficient J (two equal columns) has s = 0 there and gives a finite step (that component 0).
+    Zero columns (variables the merit does not see) are left out: their step is exactly 0; so are rows
     with ℓ = 0 and a zero gradient (inactive constraints), which do not change the solution.
     """
-    N = J.shape[1]
-    # Rows that are 0 with a zero gradient (inactive constraints: a ramp at 0) add nothing to the
-    # system; dropping them first makes the solve ~7× cheaper on the C-mount problem (95 % of rows).
-    active = (r != 0) | (J != 0).any(1)
-    J, r = J[active], r[active]
-    live = torch.linalg.vector_norm(J, dim=0) > 0
-    Jl, Dl = J[:, live], D[live]
-    n = Jl.shape[1]
-    A = torch.cat([Jl / Dl, (damping**0.5) * torch.eye(n, dtype=J.dtype, device=J.device)])
-    b = torch.cat([-r, torch.zeros(n, dtype=r.dtype, device=r.device)])
-    driver = "gelsd" if A.device.type == "cpu" else None
-    y = torch.linalg.lstsq(A, b.unsqueeze(-1), driver=driver).solution.squeeze(-1)
-    step = torch.zeros(N, dtype=J.dtype, device=J.device)
-    step[live] = y / Dl
-    return step
+
+    def __init__(self, J: Tensor, r: Tensor, D: Tensor) -> None:
+        self.n = J.shape[1]
+        # Rows that are 0 with a zero gradient (inactive constraints: a ramp at 0) add nothing to the
+        # system; dropping them first makes the factorization cheaper (on the C-mount, 95 % of rows).
+        active = (r != 0) | (J != 0).any(1)
+        J, r = J[active], r[active]
+        self.live = torch.linalg.vector_norm(J, dim=0) > 0
+        self.Dl = D[self.live]
+        U, self.s, Vh = torch.linalg.svd(J[:, self.live] / self.Dl, full_matrices=False)
+        self.V = Vh.mT
+        self.u_r = U.mT @ (-r)  # Uᵀ(−ℓ), shared by every λ
+
+    def step(self, damping: float) -> Tensor:
+        """(N,) δ minimising ‖ℓ + J δ‖² + λ‖D δ‖² for λ = ``damping``."""
+        s = self.s
+        f = torch.where(s > 0, s / (s * s + damping), torch.zeros_like(s))
+        step = torch.zeros(self.n, dtype=s.dtype, device=s.device)
+        step[self.live] = (self.V @ (f * self.u_r)) / self.Dl
+        return step
+
+
+def damped_step(J: Tensor, r: Tensor, D: Tensor, damping: float) -> Tensor:
+    """(N,) δ minimising ‖r + J δ‖² + λ‖D δ‖² (S63): ``DampedSystem(J, r, D).step(damping)``."""
+    return DampedSystem(J, r, D).step(damping)
 
 
 class LevenbergMarquardt:
@@ -132,6 +144,7 @@ class LevenbergMarquardt:
         self._rows: Tensor | None = None  # rows of J that are not all zero where ℓ is 0 (``_ensure_jacobian``)
         self._J_rows: Tensor | None = None
         self._col: tuple[Tensor, Tensor] | None = None  # (scale, column norms of scale ⊙ J) of this J
+        self._system: tuple[Tensor, Tensor, DampedSystem] | None = None  # (scale, D, its system) of this J
         self.history: list[float] = []
         self.accepted = 0
         self.rejected = 0
@@ -211,11 +224,14 @@ class LevenbergMarquardt:
             col = torch.linalg.vector_norm(scale[:, None] * self._J, dim=0)
             col = torch.where(torch.isfinite(col), col, torch.zeros_like(col))
             self._col = (scale.clone(), col)
-        rows = self._rows
-        J = scale.index_select(0, rows)[:, None] * self._J_rows
-        J = torch.where(col > DEAD_COLUMN * col.max(), J, torch.zeros_like(J))
         merit = 0.5 * float((r**2).sum())
-        delta = damped_step(J, r.index_select(0, rows), self.D, self.damping)
+        # One factorization per J, multipliers and D: a rejected step's retry only changes λ.
+        if self._system is None or not (torch.equal(self._system[0], scale) and torch.equal(self._system[1], self.D)):
+            rows = self._rows
+            J = scale.index_select(0, rows)[:, None] * self._J_rows
+            J = torch.where(col > DEAD_COLUMN * col.max(), J, torch.zeros_like(J))
+            self._system = (scale.clone(), self.D.clone(), DampedSystem(J, r.index_select(0, rows), self.D))
+        delta = self._system[2].step(self.damping)
         if not bool(torch.isfinite(delta).all()):
             return self._reject(merit, "non-finite step")
         with threads(caller_threads):
@@ -271,4 +287,4 @@ class LevenbergMarquardt:
         self.history.clear()
 
     def _forget_jacobian(self) -> None:
-        self._J = self._J_rows = self._rows = self._col = None
+        self._J = self._J_rows = self._rows = self._col = self._system = None

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from lensopt.optim.lm import LevenbergMarquardt, Trial, damped_step
+from lensopt.optim.lm import DampedSystem, LevenbergMarquardt, Trial, damped_step
 from lensopt.optim.settings import LMSettings
 
 
@@ -40,6 +40,35 @@ def test_damped_step_solves_s62() -> None:
     expected = -np.linalg.solve(J.T @ J + lam * np.diag(D**2), J.T @ r)
     got = damped_step(torch.tensor(J), torch.tensor(r), torch.tensor(D), lam)
     np.testing.assert_allclose(got.numpy(), expected, rtol=1e-12)
+
+
+def test_one_factorization_serves_every_damping() -> None:
+    # ``DampedSystem`` factorizes J D⁻¹ once; each λ then gives S62's −(JᵀJ + λD²)⁻¹Jᵀr (closed form).
+    rng = np.random.default_rng(1)
+    J = rng.normal(size=(40, 5))
+    J[:8] = 0.0  # inactive rows (ℓ = 0, zero gradient): left out, same solution
+    r = rng.normal(size=40)
+    r[:8] = 0.0
+    D = np.array([0.5, 2.0, 1.0, 3.0, 0.7])
+    system = DampedSystem(torch.tensor(J), torch.tensor(r), torch.tensor(D))
+    for lam in (1e-8, 1e-3, 0.3, 10.0, 1e6):
+        expected = -np.linalg.solve(J.T @ J + lam * np.diag(D**2), J.T @ r)
+        np.testing.assert_allclose(system.step(lam).numpy(), expected, rtol=1e-10, atol=1e-300)
+
+
+def test_a_rejected_step_reuses_the_factorization(monkeypatch: pytest.MonkeyPatch) -> None:
+    # A rejected step keeps J (S7): its retry with a larger λ must not factorize again.
+    import lensopt.optim.lm as lm_module
+
+    calls = []
+    svd = torch.linalg.svd
+    monkeypatch.setattr(lm_module.torch.linalg, "svd", lambda *a, **k: calls.append(1) or svd(*a, **k))
+    lm = _lm(_rosenbrock, [-1.2, 1.0], damping=1e-12)  # λ ≈ 0 from far away: the Gauss–Newton step overshoots
+    one = torch.ones(2, dtype=torch.float64)
+    infos = [lm.step(one) for _ in range(6)]
+    assert not infos[0].accepted  # the premise: the first try is rejected
+    jacobians = 1 + sum(i.accepted for i in infos[:-1])  # J at θ0, then after each accepted step but the last
+    assert len(calls) == jacobians < len(infos)
 
 
 def test_rank_deficient_jacobian_gives_a_finite_step() -> None:
