@@ -15,7 +15,8 @@ the ranks, and there is no import cycle anywhere.
     2.5  accel (the compiled traces and Jacobian; reached from below through the ``Engine``'s tracer)
     2    optics
     1    materials
-    0.5  leaves: engine, parallel, devices, checkpoint (they import only rank 0)
+    0.5  leaves: engine, parallel, devices, checkpoint, transforms (what the torch transforms watching the
+         core allow it: they import only rank 0)
     0    errors, files (atomic writes), the package root (``lensopt/__init__.py``): they import nothing from lensopt
 
 Two packages on the same rank must not import each other. typer, rich and pydantic appear only in the
@@ -31,7 +32,7 @@ from pathlib import Path
 PKG = Path(__file__).resolve().parents[1] / "lensopt"
 
 RANK = {"lensopt": 0, "errors": 0, "files": 0,
-        "engine": 0.5, "parallel": 0.5, "devices": 0.5, "checkpoint": 0.5,
+        "engine": 0.5, "parallel": 0.5, "devices": 0.5, "checkpoint": 0.5, "transforms": 0.5,
         "materials": 1, "optics": 2, "accel": 2.5, "analysis": 3, "imaging": 4, "plot": 4, "restore": 5, "optim": 6,
         "tolerance": 7, "spec": 8, "interchange": 8.1, "design": 8.2, "qa": 8.5, "study": 8.5,
         "cli": 9, "__main__": 9.5}

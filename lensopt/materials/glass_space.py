@@ -25,6 +25,7 @@ from torch import Tensor
 
 from lensopt.errors import LensoptError
 from lensopt.materials.catalog import DesignCatalog
+from lensopt.transforms import capturing, carries_derivatives, vmapped
 
 __all__ = ["GlassSpace", "GlassMesh", "glass_space", "glass_mesh", "mesh_distance", "catalog_distance",
            "nearest_glass"]
@@ -153,18 +154,6 @@ def _triangle_distance(p: Tensor, a: Tensor, b: Tensor, c: Tensor) -> Tensor:
     return torch.where(inside, plane, edges)
 
 
-def _plain_or_captured(g: Tensor) -> tuple[bool, bool]:
-    """(g takes no part in differentiation, the values of g may not be looked at: a graph being
-    captured or a vmapped batch); as ``optics.transforms`` (a layer above) decides."""
-    from torch._C._functorch import is_batchedtensor, is_functorch_wrapped_tensor
-    from torch.autograd.forward_ad import unpack_dual
-    from torch.fx.experimental.proxy_tensor import get_proxy_mode
-
-    plain = not ((torch.is_grad_enabled() and g.requires_grad) or is_functorch_wrapped_tensor(g)
-                 or unpack_dual(g).tangent is not None)
-    return plain, torch.compiler.is_compiling() or get_proxy_mode() is not None or is_batchedtensor(g.detach())
-
-
 def mesh_distance(g: Tensor, mesh: GlassMesh) -> Tensor:
     """(G,) distance of glass variables g (G, d) to the mesh: 0 inside a kept simplex (S55)."""
     pts = torch.as_tensor(mesh.points, dtype=g.dtype, device=g.device)
@@ -187,8 +176,8 @@ def mesh_distance(g: Tensor, mesh: GlassMesh) -> Tensor:
     # through the nearest facets alone (a minimum's derivative is the mean of its ties', as amin's): on
     # the seed's 3-D mesh this spares forward mode ~180 facets per glass. ``low + (x − x)``: the value
     # of ``low``, bit for bit, with the tangent of x.
-    plain, captured = _plain_or_captured(g)
-    if captured:  # no sizes from data: every facet with its derivatives
+    plain = not carries_derivatives(g)
+    if capturing() or vmapped(g.detach()):  # no sizes from data: every facet with its derivatives
         nearest = facet_distance(g[:, None, :], fac[None]).amin(-1)
         return torch.where(inside, torch.zeros_like(nearest), nearest)
     with torch.no_grad():

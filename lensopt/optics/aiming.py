@@ -26,7 +26,6 @@ from dataclasses import dataclass
 
 import torch
 from torch import Tensor
-from torch._C._functorch import is_batchedtensor
 
 from lensopt.optics.differential import LEAVES, stop_partials
 from lensopt.optics.lens import Lens, System
@@ -34,7 +33,7 @@ from lensopt.optics.paraxial import first_order
 from lensopt.optics.placement import surface_frames, to_local
 from lensopt.optics.sampling import launch
 from lensopt.optics.trace import Rays, RayTrace, lens_tensors, trace
-from lensopt.optics.transforms import all_settled, carries_derivatives
+from lensopt.transforms import all_settled, carries_derivatives, vmapped
 
 __all__ = ["ChiefAim", "aim_chief", "PupilAim", "aim_full", "stop_radius", "stop_hit"]
 
@@ -99,7 +98,7 @@ def attached_stop_hit(lens: Lens, rays: Rays) -> tuple[Tensor, Tensor, RayTrace]
     detached = _detach_lens(lens)
     pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
     plain = Rays(pos.detach(), dir.detach(), rays.wavelength)
-    if any(is_batchedtensor(t) for t in (*lens_tensors(detached), plain.pos, plain.dir)):
+    if vmapped(*lens_tensors(detached), plain.pos, plain.dir):
         # Values batched by a vmap (e.g. tolerance trials): the partials' trace has no batching rule for its
         # in-place products (a per-sample loop); the plain trace is as exact and far cheaper there.
         return stop_hit(lens, rays)

@@ -11,7 +11,7 @@ import torch
 from torch import Tensor
 
 from lensopt.optics.surfaces import sag
-from lensopt.optics.transforms import all_settled
+from lensopt.transforms import all_settled
 
 __all__ = ["intersect_quadric", "intersect_asphere", "quadric_xyz", "quadric_flag_xyz", "quadric_near_xyz",
            "asphere_xyz", "Vec3", "NEWTON_ITERATIONS"]

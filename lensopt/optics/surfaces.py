@@ -15,7 +15,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from lensopt.optics.transforms import capturing
+from lensopt.transforms import capturing
 
 __all__ = ["sag", "phase_slope", "normal_from_slope", "normal_xyz", "conic_normal_xyz", "sag_domain"]
 

@@ -21,7 +21,7 @@ from lensopt.optics.intersect import NEWTON_ITERATIONS, asphere_xyz, quadric_fla
 from lensopt.optics.lens import Lens, SurfaceShape
 from lensopt.optics.placement import Frames, surface_frames, to_global, to_local
 from lensopt.optics.surfaces import conic_normal_xyz, normal_xyz, phase_slope, sag
-from lensopt.optics.transforms import carries_derivatives
+from lensopt.transforms import carries_derivatives
 
 __all__ = ["Status", "REASONS", "Rays", "SurfaceHit", "RayTrace", "trace", "failure_counts", "KernelOptions",
            "trace_kernel", "index_ratio"]

@@ -32,7 +32,6 @@ from lensopt.optics.differential import supported
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling
-from lensopt.optics.transforms import carries_derivatives
 from lensopt.optim import residuals
 from lensopt.optim.image_objective import ImageObjective
 from lensopt.optim.jacobian import RampPlan, RampRows, place_ramp_rows, ramp_tangent_rows, staged_jacobian
@@ -42,6 +41,7 @@ from lensopt.optim.settings import ImageSettings, OptimizeSettings
 from lensopt.optim.solves import Solve, apply_solves, solved_quantities
 from lensopt.optim.terms import TERMS, TermContext, TermSetup, term
 from lensopt.optim.variables import Declared, Parameterization
+from lensopt.transforms import carries_derivatives
 
 __all__ = ["Evaluation", "Problem", "ProblemSetup", "SurfaceInfo"]
 

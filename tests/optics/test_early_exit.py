@@ -1,4 +1,4 @@
-"""Iterative solves that stop at convergence (``optics.transforms.all_settled``) give the numbers of the
+"""Iterative solves that stop at convergence (``transforms.all_settled``) give the numbers of the
 fixed iteration count (what a captured graph runs) to rounding, with the same flags.
 
 The reference is the same code with early exits switched off; the shipped telephoto (ten even aspheres
@@ -17,8 +17,8 @@ import lensopt.optics.aiming as aiming
 import lensopt.optics.intersect as intersect
 from lensopt.optics.bundle import trace_bundle
 from lensopt.optics.sampling import PupilSampling
-from lensopt.optics.transforms import all_settled
 from lensopt.spec import build, load_spec
+from lensopt.transforms import all_settled
 
 LENS = Path(__file__).resolve().parents[2] / "lenses" / "telephoto_5p_tr080.json"
 

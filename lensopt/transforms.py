@@ -17,7 +17,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-__all__ = ["capturing", "all_settled", "carries_derivatives"]
+__all__ = ["capturing", "vmapped", "all_settled", "carries_derivatives"]
 
 
 def capturing() -> bool:
@@ -27,14 +27,18 @@ def capturing() -> bool:
     return torch.compiler.is_compiling() or get_proxy_mode() is not None
 
 
+def vmapped(*tensors: Tensor) -> bool:
+    """Whether any of ``tensors`` holds values batched by a ``vmap`` (e.g. the tolerance trials): their
+    values may not be looked at, and ops without a batching rule run a slow per-sample loop."""
+    from torch._C._functorch import is_batchedtensor
+
+    return any(is_batchedtensor(t) for t in tensors)
+
+
 def all_settled(done: Tensor) -> bool:
     """True when every entry of the bool mask ``done`` holds and the values may be looked at (see the
     module docstring); False otherwise, and the caller runs its fixed count."""
-    if capturing():
-        return False
-    from torch._C._functorch import is_batchedtensor
-
-    if is_batchedtensor(done):
+    if capturing() or vmapped(done):
         return False
     try:
         return bool(done.all())
