@@ -333,10 +333,6 @@ class Problem:
             out[t.name] = given[t.name] if given and t.name in given else t.residual(ctx) * w
         return out
 
-    def hit_fields(self, bundle: Bundle) -> set[str]:
-        """The recorded hit fields whose derivatives the active terms read at ``bundle`` (``Term.reads``)."""
-        return {f for t in TERMS if t.weight(self.term_setup) is not None for f in t.reads(bundle)}
-
     def ramp_plan(self, theta: Tensor, lens: Lens, bundle: Bundle) -> RampPlan:
         """How the staged Jacobian takes the ramp terms (``Term.margin``) at the traced ``bundle`` of
         ``lens``: their rows of ℓ, the active rows of each (margin ≥ 0 on a valid ray: the only ones
