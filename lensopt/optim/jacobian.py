@@ -202,7 +202,8 @@ def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_
     lens_dot, start_dot = rebuild_a(list(dots_a), list(ot_a))
 
     def reads(result: RayTrace) -> Collection[str]:
-        return hit_fields(lens, finish_bundle(system, start, result))
+        holder["bundle"] = finish_bundle(system, start, result)  # the primal bundle, kept for the cut
+        return hit_fields(lens, holder["bundle"])
 
     # The trace's tangents variables first (the layout stage C takes them in: no copy there).
     result, result_dot = trace_with_tangents(lens, start.rays, lens_dot, start_dot.rays, hit_fields=reads, first=True)
@@ -217,8 +218,7 @@ def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_
     whole = cutting and picked.numel() == lead.numel() and bool(
         (picked == torch.arange(lead.numel(), device=picked.device)).all())
     if cutting:
-        fl_k, ot_k, rebuild_k = split(take_trace(finish_bundle(system, start, result).result,
-                                                 None if whole else picked))
+        fl_k, ot_k, rebuild_k = split(take_trace(holder["bundle"].result, None if whole else picked))
     cut_live = [take_rows(dots_b[i], lead, picked, front=1) for i in live_b] if cutting and not whole else []
 
     def stage_c(t: Tensor, *fl: Tensor) -> Tensor:
