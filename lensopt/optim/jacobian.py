@@ -41,10 +41,11 @@ class RampRows:
 
     Attributes:
         name: the term (its block of ℓ: ``Problem.slices[name]``).
-        margin: (lens, bundle) ↦ (B, F, W, P) the term's margins.
+        margin: (lens, bundle) ↦ (B', F, W, P) the term's margins on the blocks with an active row
+            (``Term.margin``'s ``blocks``), in order.
         weight: the term's static weight.
         sqrt_n: √(F·W·P), the residual's divisor.
-        pick: (A,) the active rows among the margins of the selected rays (``RampPlan.rays``), flattened.
+        pick: (A,) the active rows among those margins of the selected rays (``RampPlan.rays``), flattened.
         rows: (A,) the same rows in the term's block of ℓ.
     """
 

@@ -361,8 +361,10 @@ class Problem:
         ramps = []
         for t, w, act in found:
             b, k = act[:, rays].nonzero(as_tuple=True)
-            ramps.append(RampRows(t.name, functools.partial(t.margin, self.term_setup), w, math.sqrt(n_r),
-                                  b * rays.numel() + k, b * n_r + rays[k]))
+            blocks = torch.unique(b)  # sorted: the margins are taken on these blocks alone
+            margin = functools.partial(t.margin, self.term_setup, blocks=blocks.tolist())
+            ramps.append(RampRows(t.name, margin, w, math.sqrt(n_r), torch.searchsorted(blocks, b) * rays.numel() + k,
+                                  b * n_r + rays[k]))
         return RampPlan(given, tuple(ramps), rays, frozenset(fields))
 
     def residuals(self, theta: Tensor) -> Tensor:

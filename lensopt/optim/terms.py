@@ -12,7 +12,7 @@ To add a term: write its residual function (pure tensors, fixed length, DESIGN.m
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -103,10 +103,12 @@ class Term:
         config: setup ↦ the settings object of the term (its ``schedule`` is used), or None.
         reads: bundle ↦ the fields of the recorded hits (``SurfaceHit``) whose derivatives the
             residual needs at this bundle (``optim.jacobian`` computes only those); all by default.
-        margin: for a ramp term, (setup, lens, bundle) ↦ (B, F, W, P) its margins m, such that the
-            residual is ``where(valid, ramp(m), 0)`` flattened, divided by √(F·W·P) (block b, ray k
+        margin: for a ramp term, (setup, lens, bundle, blocks) ↦ (B, F, W, P) its margins m, such that
+            the residual is ``where(valid, ramp(m), 0)`` flattened, divided by √(F·W·P) (block b, ray k
             is row b·F·W·P + k): its derivative is 0 wherever m < 0 (``residuals.inactive``), so the
-            Jacobian differentiates the active rows alone (``Problem.jacobian``). None: every row.
+            Jacobian differentiates the active rows alone (``Problem.jacobian``). ``blocks`` (sorted;
+            None: all): the margins of those blocks only, in that order, the same numbers as their
+            blocks of all (the Jacobian takes the blocks with an active row). None: every row.
     """
 
     name: str
@@ -115,7 +117,7 @@ class Term:
     residual: Callable[[TermContext], Tensor]
     config: Callable[[TermSetup], Any] = lambda s: None
     reads: Callable[[Bundle], Collection[str]] = lambda b: HIT_FIELDS
-    margin: Callable[[TermSetup, Lens, Bundle], Tensor] | None = None
+    margin: Callable[[TermSetup, Lens, Bundle, Sequence[int] | None], Tensor] | None = None
 
 
 def _cons(name: str) -> Callable[[TermSetup], Any]:
@@ -156,19 +158,24 @@ def _nothing(bundle: Bundle) -> Collection[str]:
     return ()
 
 
-def _ray_path_margin(s: TermSetup, lens: Lens, bundle: Bundle) -> Tensor:
-    gaps = res.ray_path_margin(bundle, *s.gap_bounds(lens))
-    if not s.path_spans:
-        return gaps
-    return torch.cat([gaps, res.ray_path_span_margin(bundle, list(s.path_spans))])
+def _ray_path_margin(s: TermSetup, lens: Lens, bundle: Bundle, blocks: Sequence[int] | None = None) -> Tensor:
+    """Blocks 0 … S − 1 the gaps, then one per span."""
+    S = lens.num_surfaces
+    gaps = None if blocks is None else [b for b in blocks if b < S]
+    spans = list(s.path_spans) if blocks is None else [s.path_spans[b - S] for b in blocks if b >= S]
+    out = res.ray_path_margin(bundle, *s.gap_bounds(lens), gaps)
+    if not spans:
+        return out
+    return torch.cat([out, res.ray_path_span_margin(bundle, spans)])
 
 
-def _ray_angle_margin(s: TermSetup, lens: Lens, bundle: Bundle) -> Tensor:
-    return res.ray_angle_margin(bundle, list(s.interfaces), s.settings.constraints.ray_angle.max_deg)
+def _ray_angle_margin(s: TermSetup, lens: Lens, bundle: Bundle, blocks: Sequence[int] | None = None) -> Tensor:
+    return res.ray_angle_margin(bundle, list(s.interfaces), s.settings.constraints.ray_angle.max_deg, blocks)
 
 
-def _surface_normal_margin(s: TermSetup, lens: Lens, bundle: Bundle) -> Tensor:
-    return res.surface_normal_margin(bundle, list(s.refracting), s.settings.constraints.surface_normal.max_deg)
+def _surface_normal_margin(s: TermSetup, lens: Lens, bundle: Bundle, blocks: Sequence[int] | None = None) -> Tensor:
+    return res.surface_normal_margin(bundle, list(s.refracting), s.settings.constraints.surface_normal.max_deg,
+                                     blocks)
 
 
 TERMS: tuple[Term, ...] = (

@@ -183,3 +183,39 @@ def test_rays_cut_before_stage_c_equal_rays_cut_inside() -> None:
         assert J.shape == (p.num_variables + rays.numel() * 13, p.num_variables)
         assert torch.equal(r, r_in) and torch.equal(J, J_in)
         assert float(J[p.num_variables:].abs().max()) > 0
+
+
+def test_ramp_margins_on_some_blocks_are_those_blocks_of_all() -> None:
+    # The Jacobian takes a ramp term's margins on the blocks with an active row alone (``Term.margin``'s
+    # ``blocks``): they must be the same numbers, and the same derivatives, as those blocks of all the
+    # margins. The telephoto study has gaps, a span, interfaces and aspheres; at its start the plan
+    # takes a strict subset of each term's blocks (so test_staged_jacobian_equals_jacfwd_on_the_studies
+    # holds the cut margins against jacfwd of the whole ℓ).
+    from lensopt.optim.terms import term
+
+    p = build_problem(parse_spec(_study("telephoto_5p_tr080.toml")))
+    theta = p.theta0
+    lens, _ = p.lens(theta)
+    bundle = p.bundle(lens)
+    plan = p.ramp_plan(theta, lens, bundle)
+    g = torch.Generator().manual_seed(1)
+    for name in ("ray_path", "ray_angle", "surface_normal"):
+        margin = term(name).margin
+        whole = margin(p.term_setup, lens, bundle, None)
+        assert name != "ray_path" or whole.shape[0] == lens.num_surfaces + 1  # the gaps and the span
+        some = torch.randperm(whole.shape[0], generator=g)[:3].sort().values.tolist()
+        for blocks in ([0], [whole.shape[0] - 1], some, list(range(whole.shape[0]))):
+            assert torch.equal(margin(p.term_setup, lens, bundle, blocks), whole[blocks]), (name, blocks)
+    for ramp in plan.ramps:
+        assert ramp.margin(lens, bundle).shape[0] < term(ramp.name).margin(p.term_setup, lens, bundle, None).shape[0]
+    # The derivatives too: jvp along one direction of θ through the lens and the trace.
+    direction = torch.linspace(-1, 1, p.num_variables, dtype=torch.float64)
+
+    def margins(t: torch.Tensor, blocks: list[int] | None) -> torch.Tensor:
+        lens_t, _ = p.lens(t)
+        return term("ray_path").margin(p.term_setup, lens_t, p.bundle(lens_t), blocks)
+
+    _, whole_dot = torch.func.jvp(lambda t: margins(t, None), (theta,), (direction,))
+    blocks = [0, 5, lens.num_surfaces - 1, lens.num_surfaces]
+    _, some_dot = torch.func.jvp(lambda t: margins(t, blocks), (theta,), (direction,))
+    assert torch.equal(some_dot, whole_dot[blocks]) and float(some_dot.abs().max()) > 0
