@@ -27,7 +27,7 @@ import torch
 from torch import Tensor
 
 from lensopt.optics.bundle import Bundle, Launch, finish_bundle
-from lensopt.optics.differential import trace_with_tangents
+from lensopt.optics.differential import Wanted, trace_with_tangents
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.trace import RayTrace
 
@@ -62,12 +62,13 @@ class RampPlan:
     """How the Jacobian takes the ramp terms at θ: ``given`` their rows of ℓ (constants in stage C: each
     inactive row's derivative is exactly 0), ``ramps`` the active rows of each term that has any,
     ``rays`` (K,) the rays (flat F·W·P index) those rows belong to, ``fields`` the recorded hit fields
-    whose derivatives the terms read (``Term.reads``; none for a term without an active row)."""
+    (field, surface) whose derivatives the terms read (``Term.reads``, a ramp term's ``Term.reads_at``
+    its active blocks; none for a term without an active row)."""
 
     given: dict[str, Tensor]
     ramps: tuple[RampRows, ...]
     rays: Tensor | None
-    fields: frozenset[str]
+    fields: frozenset[tuple[str, int]]
 
 
 def take_rows(x: Tensor | None, lead: torch.Size, rays: Tensor | None, front: int = 0) -> Tensor | None:
@@ -178,13 +179,14 @@ def tangent_leaves(primal: Any, tangent: Any) -> list[Tensor | None]:
 
 def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_of: Callable[[Lens], Launch],
                     terms_of: Callable[[Tensor, Lens, Bundle, Bundle | None], Tensor],
-                    hit_fields: Callable[[Lens, Bundle], Collection[str]], system: System,
+                    hit_fields: Callable[[Lens, Bundle], Collection[Wanted]], system: System,
                     rays: Callable[[], Tensor | None] = lambda: None) -> tuple[Tensor, Tensor]:
     """(J (M, N), ℓ (M,)) at θ by stages A, B, C (module docstring), for the residual function
     θ ↦ ``terms_of(θ, lens, bundle, cut)`` with ``lens = lens_of(θ)``, ``launch = launch_of(lens)``,
     ``bundle = finish_bundle(system, launch, trace(lens, launch.rays, record=True))``;
-    ``hit_fields(lens, bundle)``: the recorded hit fields whose derivatives the terms read
-    (``Term.reads``), at the primal lens and traced bundle (called once, before ``terms_of``);
+    ``hit_fields(lens, bundle)``: the recorded hit fields whose derivatives the terms read (names, or
+    (name, surface) pairs: ``differential.Wanted``), at the primal lens and traced bundle (called once,
+    before ``terms_of``);
     ``rays()`` (called after ``hit_fields``): the rays (K,) (flat F·W·P indices) of ``cut``, the bundle
     cut to them (``take_rays``; None: ``cut`` is None). The cut is made on the trace and its tangents
     before stage C (an index copy of plain tensors, not of duals), or is a view when ``rays`` are all
@@ -202,7 +204,7 @@ def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_
     lens, start = rebuild_a(list(fl_a), list(ot_a))
     lens_dot, start_dot = rebuild_a(list(dots_a), list(ot_a))
 
-    def reads(result: RayTrace) -> Collection[str]:
+    def reads(result: RayTrace) -> Collection[Wanted]:
         holder["bundle"] = finish_bundle(system, start, result)  # the primal bundle, kept for the cut
         return hit_fields(lens, holder["bundle"])
 

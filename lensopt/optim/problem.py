@@ -341,19 +341,19 @@ class Problem:
         valid = bundle.result.valid
         n_r = valid.numel()
         given: dict[str, Tensor] = {}
-        fields: set[str] = set()
+        fields: set[tuple[str, int]] = set()
+        everywhere = lambda names: {(f, s) for f in names for s in range(lens.num_surfaces)}  # noqa: E731
         found = []
         for t in TERMS:
             w = t.weight(self.term_setup)
             if w is None:
                 continue
             if t.margin is None:
-                fields.update(t.reads(bundle))
+                fields.update(everywhere(t.reads(bundle)))
                 continue
             given[t.name] = t.residual(ctx) * w
             act = residuals.active(t.margin(self.term_setup, lens, bundle), valid).reshape(-1, n_r)
             if bool(act.any()):
-                fields.update(t.reads(bundle))
                 found.append((t, w, act))
         if not found:
             return RampPlan(given, (), None, frozenset(fields))
@@ -362,6 +362,8 @@ class Problem:
         for t, w, act in found:
             b, k = act[:, rays].nonzero(as_tuple=True)
             blocks = torch.unique(b)  # sorted: the margins are taken on these blocks alone
+            fields.update(t.reads_at(self.term_setup, lens, blocks.tolist()) if t.reads_at
+                          else everywhere(t.reads(bundle)))
             margin = functools.partial(t.margin, self.term_setup, blocks=blocks.tolist())
             ramps.append(RampRows(t.name, margin, w, math.sqrt(n_r), torch.searchsorted(blocks, b) * rays.numel() + k,
                                   b * n_r + rays[k]))
@@ -382,7 +384,7 @@ class Problem:
         # derivatives skip the hit fields that only terms without an active row read.
         plan: list[RampPlan] = []
 
-        def hit_fields(lens: Lens, bundle: Bundle) -> frozenset[str]:
+        def hit_fields(lens: Lens, bundle: Bundle) -> frozenset[tuple[str, int]]:
             plan.append(self.ramp_plan(theta.detach(), lens, bundle))
             return plan[0].fields
 

@@ -109,6 +109,9 @@ class Term:
             Jacobian differentiates the active rows alone (``Problem.jacobian``). ``blocks`` (sorted;
             None: all): the margins of those blocks only, in that order, the same numbers as their
             blocks of all (the Jacobian takes the blocks with an active row). None: every row.
+        reads_at: for a ramp term, (setup, lens, blocks) ↦ the recorded hits (field, surface) whose
+            derivatives its margins on ``blocks`` read (``optim.jacobian`` computes only those); None:
+            ``reads`` at every surface.
     """
 
     name: str
@@ -118,6 +121,7 @@ class Term:
     config: Callable[[TermSetup], Any] = lambda s: None
     reads: Callable[[Bundle], Collection[str]] = lambda b: HIT_FIELDS
     margin: Callable[[TermSetup, Lens, Bundle, Sequence[int] | None], Tensor] | None = None
+    reads_at: Callable[[TermSetup, Lens, Sequence[int]], Collection[tuple[str, int]]] | None = None
 
 
 def _cons(name: str) -> Callable[[TermSetup], Any]:
@@ -169,8 +173,24 @@ def _ray_path_margin(s: TermSetup, lens: Lens, bundle: Bundle, blocks: Sequence[
     return torch.cat([out, res.ray_path_span_margin(bundle, spans)])
 
 
+def _ray_path_reads(s: TermSetup, lens: Lens, blocks: Sequence[int]) -> set[tuple[str, int]]:
+    """The hit positions the gaps and spans of ``blocks`` read: each one's, from its start to its end
+    surface (the image's is the end of the trace, always differentiated)."""
+    S = lens.num_surfaces
+    ends = [(b, b + 1) if b < S else s.path_spans[b - S][:2] for b in blocks]
+    return {("pos", j) for first, stop in ends for j in range(first, stop + 1) if j < S}
+
+
 def _ray_angle_margin(s: TermSetup, lens: Lens, bundle: Bundle, blocks: Sequence[int] | None = None) -> Tensor:
     return res.ray_angle_margin(bundle, list(s.interfaces), s.settings.constraints.ray_angle.max_deg, blocks)
+
+
+def _ray_angle_reads(s: TermSetup, lens: Lens, blocks: Sequence[int]) -> set[tuple[str, int]]:
+    return {("cos2_out" if b % 2 else "cos2_in", s.interfaces[b // 2]) for b in blocks}
+
+
+def _surface_normal_reads(s: TermSetup, lens: Lens, blocks: Sequence[int]) -> set[tuple[str, int]]:
+    return {("normal", s.refracting[b]) for b in blocks}
 
 
 def _surface_normal_margin(s: TermSetup, lens: Lens, bundle: Bundle, blocks: Sequence[int] | None = None) -> Tensor:
@@ -193,14 +213,17 @@ TERMS: tuple[Term, ...] = (
     Term("image_loss", "√(2 L) of the image loss (scalar, for Adam)", _image_weight("scalar"),
          lambda c: c.setup.image.scalar(c.lens)),
     Term("ray_path", "axial ray path per gap (and per span of gaps) within its bounds (S41–S42)",
-         _cons_weight("ray_path"), _ray_path, _cons("ray_path"), lambda b: ("pos",), _ray_path_margin),
+         _cons_weight("ray_path"), _ray_path, _cons("ray_path"), lambda b: ("pos",), _ray_path_margin,
+         _ray_path_reads),
     Term("ray_angle", "angles of incidence and refraction (S43–S45)", _cons_weight("ray_angle"),
          lambda c: res.ray_angle(c.bundle, list(c.setup.interfaces), c.setup.settings.constraints.ray_angle.max_deg),
-         _cons("ray_angle"), lambda b: ("cos2_in", "cos2_out"), _ray_angle_margin),
+         _cons("ray_angle"), lambda b: ("cos2_in", "cos2_out"), _ray_angle_margin,
+         _ray_angle_reads),
     Term("surface_normal", "surface normal angles where rays hit (S46–S47)", _cons_weight("surface_normal"),
          lambda c: res.surface_normal(c.bundle, list(c.setup.refracting),
                                       c.setup.settings.constraints.surface_normal.max_deg),
-         _cons("surface_normal"), lambda b: ("normal",), _surface_normal_margin),
+         _cons("surface_normal"), lambda b: ("normal",), _surface_normal_margin,
+         _surface_normal_reads),
     Term("distortion", "distortion per field (S48–S50)", _cons_weight("distortion"),
          lambda c: res.distortion(c.lens, c.setup.system, c.spot, c.stats,
                                   c.setup.settings.constraints.distortion.max_percent / 100),

@@ -107,6 +107,32 @@ def test_only_the_requested_hit_fields_get_tangents() -> None:
 
 
 @pytest.mark.parametrize("case", list(CASES))
+def test_hit_fields_asked_for_at_some_surfaces_get_tangents_there_alone(case: str) -> None:
+    # (field, surface) pairs: that field's tangents at that surface alone (a ramp term's active blocks
+    # read a few hits); a bare name: every surface; a surface beyond the lens: nothing. The same numbers
+    # as the full set's: bit for bit where the chain's batched product runs on BLAS either way; a small
+    # one (rows × 8 × N < 400: the Cooke case's single row) takes ATen's plain loop, to rounding. The
+    # ray's own tangents keep their bits.
+    path, scale = CASES[case]
+    lens_of, rays_of, theta = _setup(path, scale)
+    lens, rays, lens_dot, rays_dot = _tangents(lens_of, rays_of, theta)
+    _, full = trace_with_tangents(lens, rays, lens_dot, rays_dot)
+    S = lens.num_surfaces
+    wanted = [("pos", 1), ("normal", S - 1), ("pos", S - 1), "cos2_in", ("t", S + 3)]
+    _, part = trace_with_tangents(lens, rays, lens_dot, rays_dot, hit_fields=wanted, first=True)
+    expect = {(f, s): f == "cos2_in" or (f, s) in wanted for f in HIT_FIELDS for s in range(S)}
+    assert sum(expect.values()) == S + 3
+    for (f, s), there in expect.items():
+        have, want = getattr(part.hits[s], f), getattr(full.hits[s], f)
+        assert (have is not None) == there, (f, s)
+        if there:
+            want = want.movedim(-1, 0)
+            small = case.startswith("Cooke")
+            assert torch.equal(have, want) or small and torch.allclose(have, want, rtol=1e-14, atol=0), (f, s)
+    assert torch.equal(part.pos, full.pos.movedim(-1, 0)) and torch.equal(part.dir, full.dir.movedim(-1, 0))
+
+
+@pytest.mark.parametrize("case", list(CASES))
 def test_tangents_variables_first_are_the_same_numbers(case: str) -> None:
     # ``first=True`` (stage C's layout: (N, *B, …), contiguous) chains each recorded field by itself:
     # the same bits as the default layout's tangents (held against jacfwd above), moved.

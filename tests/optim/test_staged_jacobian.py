@@ -89,7 +89,7 @@ def test_ramp_terms_differentiate_their_active_rows_alone() -> None:
     lens, _ = p.lens(theta)
     plan = p.ramp_plan(theta, lens, p.bundle(lens))
     assert {"ray_path", "ray_angle"} <= set(plan.given) and not plan.ramps
-    assert not {"cos2_in", "cos2_out", "pos"} & plan.fields
+    assert not {"cos2_in", "cos2_out", "pos"} & {f for f, _ in plan.fields}
     for max_deg, some in ((59.9, False), (20.0, True)):
         data["optimize"]["constraints"]["ray_angle"]["max_deg"] = max_deg
         p = build_problem(parse_spec(data))
@@ -208,6 +208,9 @@ def test_ramp_margins_on_some_blocks_are_those_blocks_of_all() -> None:
             assert torch.equal(margin(p.term_setup, lens, bundle, blocks), whole[blocks]), (name, blocks)
     for ramp in plan.ramps:
         assert ramp.margin(lens, bundle).shape[0] < term(ramp.name).margin(p.term_setup, lens, bundle, None).shape[0]
+    # Only the hits those blocks read are differentiated (``Term.reads_at``): a few of each field.
+    for f in ("pos", "normal"):
+        assert 0 < len({s for g, s in plan.fields if g == f}) < lens.num_surfaces - 2
     # The derivatives too: jvp along one direction of θ through the lens and the trace.
     direction = torch.linspace(-1, 1, p.num_variables, dtype=torch.float64)
 
