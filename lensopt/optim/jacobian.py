@@ -32,7 +32,7 @@ from lensopt.optics.lens import Lens, System
 from lensopt.optics.trace import RayTrace
 
 __all__ = ["split", "tangent_leaves", "staged_jacobian", "RampRows", "RampPlan", "take_rays", "take_trace", "take_rows",
-           "place_ramp_rows"]
+           "place_rows"]
 
 
 @dataclass(frozen=True)
@@ -107,18 +107,31 @@ def ramp_tangent_rows(plan: RampPlan, lens: Lens, cut: Bundle | None) -> list[Te
     return [(r.margin(lens, cut).reshape(-1)[r.pick] / r.sqrt_n) * r.weight for r in plan.ramps]
 
 
-def place_ramp_rows(J: Tensor, r: Tensor, size: int, plan: RampPlan, start: dict[str, int]) -> tuple[Tensor, Tensor]:
-    """(J (size, N), ℓ (size,)) from a staged result whose rows after ``size`` are ``ramp_tangent_rows``:
-    those derivatives are put into the terms' rows (``start``: first row of each term's block)."""
-    if not plan.ramps:
+def place_rows(J: Tensor, r: Tensor, plan: RampPlan, slices: dict[str, slice]) -> tuple[Tensor, Tensor]:
+    """(J (M, N), ℓ (M,)) from a staged result (J, r) whose rows are those of the terms of ``slices`` (each
+    term's block of ℓ, in order) but ``plan.given``'s, then ``ramp_tangent_rows``: a given term's rows of
+    ℓ are ``plan.given``'s, of J 0 but for its active rows. J is laid out as ``staged_jacobian`` gives it,
+    variables first (an (M, N) view of an (N, M) tensor): zeros written once rather than carried as the
+    tangents of constants through stage C (most rows of a ramp term are 0)."""
+    if not plan.given:
         return J, r
-    extra, J, r = J[size:], J[:size], r[:size]
+    size = max(sl.stop for sl in slices.values())
+    Jt = J.new_zeros(J.shape[1], size)
+    out = r.new_empty(size)
     pos = 0
+    for name, sl in slices.items():
+        if name in plan.given:
+            out[sl] = plan.given[name]
+            continue
+        n = sl.stop - sl.start
+        Jt[:, sl] = J[pos:pos + n].T
+        out[sl] = r[pos:pos + n]
+        pos += n
     for ramp in plan.ramps:
         n = ramp.rows.numel()
-        J[start[ramp.name] + ramp.rows] = extra[pos:pos + n]
+        Jt[:, slices[ramp.name].start + ramp.rows] = J[pos:pos + n].T
         pos += n
-    return J, r
+    return Jt.T, out
 
 
 def split(obj: Any) -> tuple[list[Tensor], list[Tensor], Callable[[list[Tensor], list[Tensor]], Any]]:

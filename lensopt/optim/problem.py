@@ -34,7 +34,7 @@ from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling
 from lensopt.optim import residuals
 from lensopt.optim.image_objective import ImageObjective
-from lensopt.optim.jacobian import RampPlan, RampRows, place_ramp_rows, ramp_tangent_rows, staged_jacobian
+from lensopt.optim.jacobian import RampPlan, RampRows, place_rows, ramp_tangent_rows, staged_jacobian
 from lensopt.optim.rays import head, with_rim
 from lensopt.optim.schedule import schedule_weight
 from lensopt.optim.settings import ImageSettings, OptimizeSettings
@@ -378,10 +378,10 @@ class Problem:
         apply, else ``torch.func.jacfwd`` over the whole residual function (the same derivatives)."""
         if self.image is not None or not supported(self.setup.lens):
             return self.jacobian_jacfwd(theta)
-        # Ramp terms (``Term.margin``) enter stage C as constants; the derivatives of their active rows
-        # (on the aimed studies ≤ 10 % of them, often none) are taken on those rows' rays alone and
-        # put in place; every other row of theirs has a derivative of exactly 0. The trace's
-        # derivatives skip the hit fields that only terms without an active row read.
+        # Ramp terms (``Term.margin``) stay out of stage C (their rows of ℓ are the plan's); the
+        # derivatives of their active rows (on the aimed studies ≤ 10 % of them, often none) are taken
+        # on those rows' rays and blocks alone and put in place (``place_rows``); every other row of
+        # theirs has a derivative of exactly 0. The trace differentiates only the hits the terms read.
         plan: list[RampPlan] = []
 
         def hit_fields(lens: Lens, bundle: Bundle) -> frozenset[tuple[str, int]]:
@@ -389,13 +389,14 @@ class Problem:
             return plan[0].fields
 
         def terms_of(t: Tensor, lens: Lens, bundle: Bundle, cut: Bundle | None) -> Tensor:
-            parts = list(self._terms(t, lens, bundle, plan[0].given).values())
-            return torch.cat(parts + ramp_tangent_rows(plan[0], lens, cut))
+            parts = [v for name, v in self._terms(t, lens, bundle, plan[0].given).items() if name not in plan[0].given]
+            parts += ramp_tangent_rows(plan[0], lens, cut)
+            return torch.cat(parts) if parts else t.new_zeros(0)
 
         J, r = staged_jacobian(theta, lens_of=lambda t: self.lens(t)[0],
                                launch_of=lambda lens: self.launch(lens, theta), terms_of=terms_of,
                                hit_fields=hit_fields, system=self.system, rays=lambda: plan[0].rays)
-        return place_ramp_rows(J, r, self.size, plan[0], {name: sl.start for name, sl in self.slices.items()})
+        return place_rows(J, r, plan[0], self.slices)
 
     def jacobian_jacfwd(self, theta: Tensor) -> tuple[Tensor, Tensor]:
         """(M, N) Jacobian by ``torch.func.jacfwd`` over ``residuals`` and ℓ(θ) (M,): the reference."""

@@ -222,3 +222,29 @@ def test_ramp_margins_on_some_blocks_are_those_blocks_of_all() -> None:
     blocks = [0, 5, lens.num_surfaces - 1, lens.num_surfaces]
     _, some_dot = torch.func.jvp(lambda t: margins(t, blocks), (theta,), (direction,))
     assert torch.equal(some_dot, whole_dot[blocks]) and float(some_dot.abs().max()) > 0
+
+
+@pytest.mark.parametrize("ramps", [False, True])
+def test_rows_placed_after_stage_c_are_the_whole_residual_functions(ramps: bool) -> None:
+    # Stage C leaves the ramp terms out (their rows of ℓ come from the plan, their rows of J are 0 but
+    # for the active ones, ``place_rows``). Without a ramp term J is stage C's as it is; with ramp terms
+    # between other terms (ray angle and surface normal before distortion and illumination) every
+    # term's rows must land in its block: ℓ bit for bit, J to rounding against jacfwd, and J laid out
+    # variables first as stage C gives it (what LM's column norms and row selection read).
+    from tests.helpers import small_problem_data
+
+    data = small_problem_data()
+    if ramps:
+        data["optimize"]["constraints"] |= {"ray_angle": {"max_deg": 25.0}, "surface_normal": {"max_deg": 20.0}}
+    p = build_problem(parse_spec(data))
+    theta = p.theta0 * (1 + 1e-3 * torch.linspace(-1, 1, p.num_variables, dtype=torch.float64))
+    lens, _ = p.lens(theta)
+    plan = p.ramp_plan(theta, lens, p.bundle(lens))
+    assert bool(plan.given) == ramps and (len(plan.ramps) == 2) == ramps
+    ref, r_ref = p.jacobian_jacfwd(theta)
+    J, r = p.jacobian(theta)
+    assert torch.equal(r, r_ref)
+    _assert_equal_by_group(p, J, ref)
+    assert J.T.is_contiguous()
+    for name in ("tra", "distortion", "relative_illumination"):
+        assert float(ref[p.slices[name]].abs().max()) > 0, name
