@@ -102,8 +102,8 @@ def attached_stop_hit(lens: Lens, rays: Rays) -> tuple[Tensor, Tensor, RayTrace]
         # Values batched by a vmap (e.g. tolerance trials): the partials' trace has no batching rule for its
         # in-place products (a per-sample loop); the plain trace is as exact and far cheaper there.
         return stop_hit(lens, rays)
-    x, y, hit = stop_hit(detached, plain)
-    partials = stop_partials(detached, plain)[..., :2, :]  # (*B, 2, 6 + L)
+    hit, partials = stop_partials(detached, plain)  # the trace to the stop (stop_hit's) and its partials
+    x, y, partials = hit.pos[..., 0], hit.pos[..., 1], partials[..., :2, :]  # (*B, 2, 6 + L)
     keep = hit.valid[..., None, None] & torch.isfinite(partials)  # a lost ray's values are not used
     partials = torch.where(keep, partials, torch.zeros_like(partials))
     moved = torch.cat([pos, dir], -1)

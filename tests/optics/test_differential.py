@@ -196,6 +196,26 @@ def test_attached_stop_hit_is_the_trace_to_the_stop_in_value_and_derivative(case
         assert float((want - have).abs().max()) <= 1e-12 * scale_k
 
 
+@pytest.mark.parametrize("case", list(CASES))
+def test_stop_partials_trace_is_the_trace_to_the_stop(case: str) -> None:
+    # ``stop_partials`` returns the trace to the stop it differentiates (``attached_stop_hit`` takes its
+    # values from there instead of tracing again): bit for bit ``trace(…, upto=stop)``, the rays lost
+    # before the stop (overfilled Cooke) and their status included; its partials are those of the stop
+    # hits, held against jacfwd above.
+    from lensopt.optics.differential import stop_partials
+
+    path, scale = CASES[case]
+    lens_of, rays_of, theta = _setup(path, scale)
+    lens, rays = lens_of(theta), rays_of(theta)
+    ref = trace(lens, rays, upto=lens.stop)
+    hit, partials = stop_partials(lens, rays)
+    for name in ("pos", "dir", "status", "backtrack"):
+        assert torch.equal(getattr(hit, name), getattr(ref, name)), name
+    assert hit.failed_at is None and partials.shape[:-1] == (*ref.status.shape, 3)
+    if case.startswith("Cooke"):
+        assert 0 < int(ref.valid.sum()) < ref.valid.numel()
+
+
 def test_attached_stop_hit_under_vmap_is_the_plain_trace_without_a_fallback_loop() -> None:
     # Lens values batched by a vmap (tolerance trials): the partials' trace has no batching rule for its
     # in-place products, so ``attached_stop_hit`` traces plainly there: the same numbers as ``stop_hit`` per
