@@ -315,9 +315,7 @@ class Problem:
         return self._terms(theta, lens, self.bundle(lens))
 
     def _context(self, theta: Tensor, lens: Lens, bundle: Bundle) -> TermContext:
-        spot = head(bundle, self.num_spot)
-        stats = spot_stats(spot, self.system.wavelength_weights, self.field_weights)
-        return TermContext(self.term_setup, theta, lens, bundle, spot, stats)
+        return TermContext(self.term_setup, theta, lens, bundle, head(bundle, self.num_spot))
 
     def _terms(self, theta: Tensor, lens: Lens, bundle: Bundle,
                given: dict[str, Tensor] | None = None) -> dict[str, Tensor]:

@@ -13,9 +13,8 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor
 
-from lensopt.analysis.distortion import distortion as distortion_per_field
+from lensopt.analysis.distortion import centroid_distortion
 from lensopt.analysis.illumination import relative_illumination_std
-from lensopt.analysis.spot import SpotStats
 from lensopt.optics.bundle import Bundle
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.trace import RayTrace
@@ -49,15 +48,16 @@ def _ramp(x: Tensor) -> Tensor:
     return torch.clamp_min(x, 0.0)
 
 
-def tra(bundle: Bundle, stats: SpotStats, wavelength_weights: Tensor, field_weights: Tensor) -> Tensor:
-    """(2 n_r,) transverse ray aberrations about each field's weighted centroid (S37–S39).
+def tra(bundle: Bundle, centroid: Tensor, wavelength_weights: Tensor, field_weights: Tensor) -> Tensor:
+    """(2 n_r,) transverse ray aberrations about each field's weighted centroid ``centroid`` (F, 2)
+    (``analysis.spot.spot_centroid``) (S37–S39).
 
     Every ray of field h, wavelength w is weighted by sqrt(f_h/Σf · W_w/ΣW / P), so that with no
     failed rays ‖ℓ_TRA‖² = Σ_h f̂_h SR_h² = ESR² (S40 generalized to weights).
     """
     res = bundle.result
     F, W, P = res.status.shape
-    xy = res.pos[..., :2] - stats.centroid[:, None, None, :]
+    xy = res.pos[..., :2] - centroid[:, None, None, :]
     ww = wavelength_weights.to(xy.dtype) / wavelength_weights.sum()
     fw = field_weights.to(xy.dtype) / field_weights.sum()
     scale = torch.sqrt(fw[:, None, None] * ww[None, :, None] / P)
@@ -179,9 +179,10 @@ def surface_normal_margin(bundle: Bundle, surfaces: list[int], max_deg: float,
     return c2 - torch.stack([res.hits[s].normal[..., 2] ** 2 for s in surfaces])
 
 
-def distortion(lens: Lens, system: System, bundle: Bundle, stats: SpotStats, max_fraction: float) -> Tensor:
-    """(F,) distortion residuals (S48–S50): ramp(|D_h| − D_max)/√n_h, D as a fraction."""
-    d = distortion_per_field(lens, system, bundle, stats)
+def distortion(lens: Lens, system: System, bundle: Bundle, centroid: Tensor, max_fraction: float) -> Tensor:
+    """(F,) distortion residuals (S48–S50): ramp(|D_h| − D_max)/√n_h, D as a fraction; ``centroid``:
+    (F, 2) the fields' spot centroids."""
+    d = centroid_distortion(lens, system, bundle, centroid)
     return _ramp(d.abs() - max_fraction) / math.sqrt(d.shape[0])
 
 

@@ -12,6 +12,7 @@ To add a term: write its residual function (pure tensors, fixed length, DESIGN.m
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -19,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 import torch
 from torch import Tensor
 
-from lensopt.analysis.spot import SpotStats
+from lensopt.analysis.spot import SpotStats, spot_centroid, spot_stats
 from lensopt.materials.glass_space import GlassMesh, GlassSpace, catalog_distance, mesh_distance
 from lensopt.optics.bundle import Bundle
 from lensopt.optics.differential import HIT_FIELDS
@@ -80,7 +81,11 @@ class TermContext:
         theta: (N,) variables.
         lens: the solved lens of θ.
         bundle: every optimization ray (spot sample + rim rays), traced with ``record=True``.
-        spot: the spot sample part of ``bundle``; stats: its spot statistics.
+        spot: the spot sample part of ``bundle``.
+
+    Computed on first use (the Jacobian's stage C carries N tangents through every operation, so
+    what no term reads is not computed): ``stats`` the spot statistics of ``spot``, ``centroid`` (F, 2)
+    their centroids alone (the same numbers).
     """
 
     setup: TermSetup
@@ -88,7 +93,14 @@ class TermContext:
     lens: Lens
     bundle: Bundle
     spot: Bundle
-    stats: SpotStats
+
+    @functools.cached_property
+    def stats(self) -> SpotStats:
+        return spot_stats(self.spot, self.setup.system.wavelength_weights, self.setup.field_weights)
+
+    @functools.cached_property
+    def centroid(self) -> Tensor:
+        return spot_centroid(self.spot, self.setup.system.wavelength_weights)
 
 
 @dataclass(frozen=True)
@@ -201,7 +213,7 @@ def _surface_normal_margin(s: TermSetup, lens: Lens, bundle: Bundle, blocks: Seq
 TERMS: tuple[Term, ...] = (
     Term("tra", "transverse ray aberrations about the field centroids, ‖ℓ‖ = ESR (S37–S39)",
          lambda s: s.settings.tra.weight if s.objective == "spot" and s.settings.tra.weight > 0 else None,
-         lambda c: res.tra(c.spot, c.stats, c.setup.system.wavelength_weights, c.setup.field_weights),
+         lambda c: res.tra(c.spot, c.centroid, c.setup.system.wavelength_weights, c.setup.field_weights),
          lambda s: s.settings.tra, _nothing),
     Term("wavefront", "RMS wavefront error per field and wavelength, waves, piston and tilt removed",
          lambda s: None if s.settings.wavefront is None else s.settings.wavefront.weight,
@@ -225,7 +237,7 @@ TERMS: tuple[Term, ...] = (
          _cons("surface_normal"), lambda b: ("normal",), _surface_normal_margin,
          _surface_normal_reads),
     Term("distortion", "distortion per field (S48–S50)", _cons_weight("distortion"),
-         lambda c: res.distortion(c.lens, c.setup.system, c.spot, c.stats,
+         lambda c: res.distortion(c.lens, c.setup.system, c.spot, c.centroid,
                                   c.setup.settings.constraints.distortion.max_percent / 100),
          _cons("distortion"), _nothing),
     Term("relative_illumination", "relative illumination per field (S52–S54)", _cons_weight("relative_illumination"),
