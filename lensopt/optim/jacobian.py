@@ -59,11 +59,11 @@ class RampRows:
 
 @dataclass(frozen=True)
 class RampPlan:
-    """How the Jacobian takes the ramp terms at θ: ``given`` their rows of ℓ (constants in stage C: each
-    inactive row's derivative is exactly 0), ``ramps`` the active rows of each term that has any,
-    ``rays`` (K,) the rays (flat F·W·P index) those rows belong to, ``fields`` the recorded hit fields
-    (field, surface) whose derivatives the terms read (``Term.reads``, a ramp term's ``Term.reads_at``
-    its active blocks; none for a term without an active row)."""
+    """How the Jacobian takes the ramp terms at θ: ``given`` their rows of ℓ (left out of stage C and
+    placed after it, ``place_rows``: each inactive row's derivative is exactly 0), ``ramps`` the active
+    rows of each term that has any, ``rays`` (K,) the rays (flat F·W·P index) those rows belong to,
+    ``fields`` the recorded hit fields (field, surface) whose derivatives the terms read (``Term.reads``,
+    a ramp term's ``Term.reads_at`` its active blocks; none for a term without an active row)."""
 
     given: dict[str, Tensor]
     ramps: tuple[RampRows, ...]
