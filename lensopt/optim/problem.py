@@ -389,7 +389,7 @@ class Problem:
         def terms_of(t: Tensor, lens: Lens, bundle: Bundle, cut: Bundle | None) -> Tensor:
             parts = [v for name, v in self._terms(t, lens, bundle, plan[0].given).items() if name not in plan[0].given]
             parts += ramp_tangent_rows(plan[0], lens, cut)
-            return torch.cat(parts) if parts else t.new_zeros(0)
+            return torch.cat(parts) if parts else t[:0]  # no row: still one of θ's (J (0, N) under vmap)
 
         J, r = staged_jacobian(theta, lens_of=lambda t: self.lens(t)[0],
                                launch_of=lambda lens: self.launch(lens, theta), terms_of=terms_of,

@@ -248,3 +248,20 @@ def test_rows_placed_after_stage_c_are_the_whole_residual_functions(ramps: bool)
     assert J.T.is_contiguous()
     for name in ("tra", "distortion", "relative_illumination"):
         assert float(ref[p.slices[name]].abs().max()) > 0, name
+
+
+@pytest.mark.parametrize("max_deg", [20.0, 89.0])
+def test_a_problem_of_ramp_terms_alone(make_cooke, max_deg: float) -> None:  # noqa: ANN001
+    # No TRA, no failure term: every row is a ray-angle row. With none active (89°) stage C has no row
+    # at all; J is still (M, N), all 0, as jacfwd's.
+    data = make_cooke(tra={"weight": 0.0}, constraints={"ray_failure": {"weight": 0.0},
+                                                         "ray_angle": {"max_deg": max_deg}})
+    for s in (0, 2, 4):
+        data["surfaces"][s]["vary"] = ["radius"]
+    p = build_problem(parse_spec(data))
+    assert list(p.slices) == ["ray_angle"]
+    ref, r_ref = p.jacobian_jacfwd(p.theta0)
+    J, r = p.jacobian(p.theta0)
+    assert J.shape == ref.shape == (p.size, 3) and torch.equal(r, r_ref)
+    _assert_equal_by_group(p, J, ref)
+    assert (float(ref.abs().max()) > 0) == (max_deg < 45)
