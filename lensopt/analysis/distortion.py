@@ -11,7 +11,7 @@ from lensopt.optics.bundle import Bundle
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.paraxial import chief_image_height
 
-__all__ = ["paraxial_heights", "distortion"]
+__all__ = ["paraxial_heights", "distortion", "centroid_distortion"]
 
 
 def paraxial_heights(lens: Lens, system: System, bundle: Bundle) -> Tensor:
@@ -24,7 +24,12 @@ def distortion(lens: Lens, system: System, bundle: Bundle, stats: SpotStats) -> 
 
     The denominator is the paraxial height of the field with the largest |y'| (the outermost field).
     """
+    return centroid_distortion(lens, system, bundle, stats.centroid)
+
+
+def centroid_distortion(lens: Lens, system: System, bundle: Bundle, centroid: Tensor) -> Tensor:
+    """``distortion`` from the fields' spot centroids (F, 2) (``spot_stats``' or ``spot_centroid``'s)."""
     y_par = paraxial_heights(lens, system, bundle)
     # gather with a tensor index, not y_par[tensor]: no .item(), so torch.compile keeps one graph.
     outer = y_par.gather(0, torch.argmax(y_par.detach().abs()).reshape(1)).squeeze(0)
-    return (stats.centroid[:, 1] - y_par) / outer
+    return (centroid[:, 1] - y_par) / outer

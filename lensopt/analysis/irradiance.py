@@ -85,7 +85,8 @@ def relative_illumination_flux(
     num_w = lens.wavelength_um.shape[0]
     with torch.no_grad():
         fo = first_order(lens, system)
-        r_stop = stop_radius(lens, system, epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z)
+        r_stop = stop_radius(lens, system, epd=fo.epd, entrance_pupil_z=fo.entrance_pupil_z,
+                             paraxial_mm=fo.stop_semi_diameter)
         shapes = list(lens.shapes)
         shapes[lens.stop] = dataclasses.replace(shapes[lens.stop], clip=True)
         sd = lens.semi_diameter.clone()

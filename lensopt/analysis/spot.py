@@ -16,8 +16,8 @@ from lensopt.engine import Engine
 from lensopt.optics.bundle import Bundle
 from lensopt.optics.lens import Lens, System
 
-__all__ = ["SpotStats", "spot_stats", "safe_sqrt", "seed_esr", "seed_spot_stats", "SEED_FIELDS", "SEED_SAMPLING",
-           "SEED_MEASURE"]
+__all__ = ["SpotStats", "spot_stats", "spot_centroid", "safe_sqrt", "seed_esr", "seed_spot_stats", "SEED_FIELDS",
+           "SEED_SAMPLING", "SEED_MEASURE"]
 
 
 def safe_sqrt(x: Tensor) -> Tensor:
@@ -47,6 +47,33 @@ class SpotStats:
     num_valid: Tensor
 
 
+def _weighted(bundle: Bundle, wavelength_weights: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """xy (F, W, P, 2) on the image, valid (F, W, P), the rays' weights m (validity times pupil weights)
+    and the spectral weights W_w·m (F, W, P)."""
+    res = bundle.result
+    xy = res.pos[..., :2]
+    valid = res.valid
+    m = valid.to(xy.dtype)
+    if bundle.pupil_weights is not None:
+        m = m * bundle.pupil_weights.to(xy.dtype)
+    return xy, valid, m, wavelength_weights.to(xy.dtype)[None, :, None] * m
+
+
+def _centroid(bundle: Bundle, xy: Tensor, valid: Tensor, weights: Tensor, dims: tuple[int, ...]) -> Tensor:
+    total = weights.sum(dims).clamp_min(torch.finfo(xy.dtype).tiny)
+    c = (torch.where(valid.unsqueeze(-1), xy, 0.0) * weights.unsqueeze(-1)).sum(dims) / total.unsqueeze(-1)
+    if bundle.half_pupil:  # x̄ = 0 by symmetry about the meridional plane (S37)
+        c = torch.stack([torch.zeros_like(c[..., 0]), c[..., 1]], -1)
+    return c
+
+
+def spot_centroid(bundle: Bundle, wavelength_weights: Tensor) -> Tensor:
+    """(F, 2) the wavelength-weighted centroid per field of ``spot_stats`` alone (the same numbers), for
+    callers that read no radius (the residual terms)."""
+    xy, valid, _, ww = _weighted(bundle, wavelength_weights)
+    return _centroid(bundle, xy, valid, ww, (1, 2))
+
+
 def spot_stats(bundle: Bundle, wavelength_weights: Tensor, field_weights: Tensor | None = None) -> SpotStats:
     """RMS spot radii and centroids of ``bundle`` (batch F × W × P) on the image surface.
 
@@ -54,20 +81,7 @@ def spot_stats(bundle: Bundle, wavelength_weights: Tensor, field_weights: Tensor
         wavelength_weights: (W,) spectral weights W_w.
         field_weights: (F,) weights for the ESR; uniform by default.
     """
-    res = bundle.result
-    xy = res.pos[..., :2]
-    valid = res.valid
-    m = valid.to(xy.dtype)
-    if bundle.pupil_weights is not None:
-        m = m * bundle.pupil_weights.to(xy.dtype)
-    ww = wavelength_weights.to(xy.dtype)[None, :, None] * m  # (F, W, P)
-
-    def centroid(weights: Tensor, dims: tuple[int, ...]) -> Tensor:
-        total = weights.sum(dims).clamp_min(torch.finfo(xy.dtype).tiny)
-        c = (torch.where(valid.unsqueeze(-1), xy, 0.0) * weights.unsqueeze(-1)).sum(dims) / total.unsqueeze(-1)
-        if bundle.half_pupil:  # x̄ = 0 by symmetry about the meridional plane (S37)
-            c = torch.stack([torch.zeros_like(c[..., 0]), c[..., 1]], -1)
-        return c
+    xy, valid, m, ww = _weighted(bundle, wavelength_weights)
 
     def rms(weights: Tensor, c: Tensor, dims: tuple[int, ...]) -> Tensor:
         d2 = ((xy - c) ** 2).sum(-1)
@@ -75,9 +89,9 @@ def spot_stats(bundle: Bundle, wavelength_weights: Tensor, field_weights: Tensor
         total = weights.sum(dims).clamp_min(torch.finfo(xy.dtype).tiny)
         return safe_sqrt((weights * d2).sum(dims) / total)
 
-    c_h = centroid(ww, (1, 2))  # (F, 2)
+    c_h = _centroid(bundle, xy, valid, ww, (1, 2))  # (F, 2)
     sr_h = rms(ww, c_h[:, None, None, :], (1, 2))
-    c_hw = centroid(m, (2,))  # (F, W, 2)
+    c_hw = _centroid(bundle, xy, valid, m, (2,))  # (F, W, 2)
     sr_hw = rms(m, c_hw[:, :, None, :], (2,))
     if field_weights is None:
         field_weights = torch.ones_like(sr_h)

@@ -102,8 +102,8 @@ def attached_stop_hit(lens: Lens, rays: Rays) -> tuple[Tensor, Tensor, RayTrace]
         # Values batched by a vmap (e.g. tolerance trials): the partials' trace has no batching rule for its
         # in-place products (a per-sample loop); the plain trace is as exact and far cheaper there.
         return stop_hit(lens, rays)
-    x, y, hit = stop_hit(detached, plain)
-    partials = stop_partials(detached, plain)[..., :2, :]  # (*B, 2, 6 + L)
+    hit, partials = stop_partials(detached, plain)  # the trace to the stop (stop_hit's) and its partials
+    x, y, partials = hit.pos[..., 0], hit.pos[..., 1], partials[..., :2, :]  # (*B, 2, 6 + L)
     keep = hit.valid[..., None, None] & torch.isfinite(partials)  # a lost ray's values are not used
     partials = torch.where(keep, partials, torch.zeros_like(partials))
     moved = torch.cat([pos, dir], -1)
@@ -327,10 +327,12 @@ class FullSolve:
     traced: Tensor
 
 
-def stop_radius(lens: Lens, system: System, *, epd: Tensor, entrance_pupil_z: Tensor) -> Tensor:
+def stop_radius(lens: Lens, system: System, *, epd: Tensor, entrance_pupil_z: Tensor,
+                paraxial_mm: Tensor | None = None) -> Tensor:
     """() height on the stop of the real on-axis marginal ray (pupil (0, 1), reference wavelength), mm;
-    the paraxial marginal height when that ray fails. A placed lens's stop keeps its size: the radius is
-    that of the centred lens (a decentered stop would otherwise shrink by its decenter)."""
+    the paraxial marginal height when that ray fails (``paraxial_mm``: ``first_order``'s
+    ``stop_semi_diameter`` where the caller has it, else computed here). A placed lens's stop keeps its
+    size: the radius is that of the centred lens (a decentered stop would otherwise shrink by its decenter)."""
     lens = dataclasses.replace(lens, placement=None)
     ref = system.reference
     pupil = torch.zeros(1, lens.wavelength_um.shape[0], 1, 2, dtype=lens.dtype, device=lens.device)
@@ -338,7 +340,9 @@ def stop_radius(lens: Lens, system: System, *, epd: Tensor, entrance_pupil_z: Te
     tan0 = torch.zeros(1, dtype=lens.dtype, device=lens.device)
     _, y, hit = attached_stop_hit(lens, launch(lens, system, pupil, tan0, epd=epd, entrance_pupil_z=entrance_pupil_z))
     real = y[0, ref, 0].abs()
-    return torch.where(hit.valid[0, ref, 0], real, first_order(lens, system).stop_semi_diameter)
+    if paraxial_mm is None:
+        paraxial_mm = first_order(lens, system).stop_semi_diameter
+    return torch.where(hit.valid[0, ref, 0], real, paraxial_mm)
 
 
 def aim_full(
@@ -353,6 +357,7 @@ def aim_full(
     tol_mm: float | None = None,
     aperture: tuple[Tensor, Tensor] | None = None,
     solved: FullSolve | None = None,
+    paraxial_stop_mm: Tensor | None = None,
 ) -> PupilAim:
     """Full ray aiming (S1.3.2, S21–S22): pupil factors that put the marginal rays on the stop edge.
 
@@ -378,6 +383,8 @@ def aim_full(
             are aimed at the stop edge; the lateral ray starts on the opening's chord. Without it the
             unvignetted pupil is aimed, whose cut-off rays may miss the front elements altogether.
         solved: the ``FullSolve`` of an earlier call on the same lens values (``PupilAim.solve``).
+        paraxial_stop_mm: ``first_order``'s ``stop_semi_diameter`` of the lens, where the caller has it
+            (``stop_radius``'s fallback; else computed there).
 
     Returns:
         A ``PupilAim`` with the factors, residuals on the stop and convergence flags.
@@ -392,7 +399,7 @@ def aim_full(
     det_args = (detached, tan_field.detach(), epd.detach(), entrance_pupil_z.detach(),
                 None if x_off is None else x_off.detach())
     att_args = (lens, tan_field, epd, entrance_pupil_z, x_off)
-    radius = stop_radius(lens, system, epd=epd, entrance_pupil_z=entrance_pupil_z)
+    radius = stop_radius(lens, system, epd=epd, entrance_pupil_z=entrance_pupil_z, paraxial_mm=paraxial_stop_mm)
     r_det = radius.detach()
 
     def stop_hits(u: Tensor, y0: Tensor, args: tuple) -> tuple[Tensor, Tensor]:

@@ -98,7 +98,8 @@ def pupil_shape(
         # Behind a front aperture the vignetting comes first: only rays through the opening are aimed.
         opening = None if fa is None else (centre[:, None], radius)
         full = aim_full(lens, system, tan_field, steps=aim_steps, chief=chief, aperture=opening, **opts,
-                        solved=None if solved is None or solved.full is None else solved.full.solve)
+                        solved=None if solved is None or solved.full is None else solved.full.solve,
+                        paraxial_stop_mm=fo.stop_semi_diameter)
         factors = full.factors
     if vignetting is not None:
         vignetting = vignetting.to(lens.dtype).expand(num_f, num_w, 3)

@@ -51,7 +51,7 @@ from lensopt.optics.trace import (
     surface_step,
 )
 
-__all__ = ["supported", "trace_with_tangents", "HIT_FIELDS", "LEAVES", "stop_partials"]
+__all__ = ["supported", "trace_with_tangents", "HIT_FIELDS", "Wanted", "LEAVES", "stop_partials"]
 
 
 def supported(lens: Lens) -> bool:
@@ -238,13 +238,26 @@ def _chain(local: list[Tensor], tin: Tensor, per_ray: int, e: Tensor) -> Tensor:
 HIT_FIELDS = frozenset(("pos", "dir_in", "dir_out", "normal", "t", "cos2_in", "cos2_out"))
 """The fields of ``SurfaceHit`` that carry derivatives."""
 
+Wanted = str | tuple[str, int]
+"""A recorded field whose tangents are wanted: its name (at every surface) or (name, surface)."""
+
+
+def _per_surface(wanted: Collection[Wanted], S: int) -> list[set[str]]:
+    """The fields wanted at each of S surfaces (pairs for surfaces beyond them are left out)."""
+    out: list[set[str]] = [set() for _ in range(S)]
+    for w in wanted:
+        name, surfaces = (w, range(S)) if isinstance(w, str) else (w[0], [w[1]] if w[1] < S else [])
+        for s in surfaces:
+            out[s].add(name)
+    return out
+
 _SIDE_ROWS = {"pos": (6, 7, 8), "dir_out": (9, 10, 11), "normal": (12, 13, 14), "t": (15,), "cos2_in": (16,),
               "cos2_out": (17,)}
 """Rows of ``_surface_local``'s output (after the six of the new ray) for each recorded field."""
 
 
 def trace_with_tangents(lens: Lens, rays: Rays, lens_dot: Lens, rays_dot: Rays, *,
-                        hit_fields: Callable[[RayTrace], Collection[str]] | Collection[str] = HIT_FIELDS,
+                        hit_fields: Callable[[RayTrace], Collection[Wanted]] | Collection[Wanted] = HIT_FIELDS,
                         upto: int | None = None, first: bool = False) -> tuple[RayTrace, RayTrace]:
     """``trace(lens, rays, record=True)`` and its tangents.
 
@@ -252,13 +265,15 @@ def trace_with_tangents(lens: Lens, rays: Rays, lens_dot: Lens, rays_dot: Rays, 
         lens, rays: as for ``trace`` (a lens on its axis: ``supported``).
         lens_dot: tangents of the lens tensors, each with a trailing dimension of N variables.
         rays_dot: tangents of the rays: pos and dir (*B, 3, N) (broadcastable like the primals).
-        hit_fields: the ``SurfaceHit`` fields whose tangents are wanted (``HIT_FIELDS``), or a function
+        hit_fields: the ``SurfaceHit`` fields whose tangents are wanted (``HIT_FIELDS``; a name: at every
+            surface, (name, s): at surface s alone; ``Wanted``), or a function
             of the traced ``RayTrace`` that says which (e.g. more when some ray failed). The others are
             not computed (None in the tangent hits): most of the cost of a trace's derivatives is
             carrying per-surface records that the residual terms do not read.
-        upto: trace surfaces 0 … ``upto`` only (no image step; e.g. the stop): then ``pos``/``dir`` are
-            the rays leaving surface ``upto`` (``hits[upto].pos`` their hits on it, as ``trace(…,
-            upto=upto)`` returns them where the ray reached it), and ``failed_at`` is None.
+        upto: trace surfaces 0 … ``upto`` only (no image step; e.g. the stop): then the values are
+            those of ``trace(…, upto=upto)`` (``pos``/``dir``/``status``: the rays on surface ``upto``,
+            not bent there; ``hits`` every recorded surface's, ``failed_at`` None), and the tangents
+            those of the requested hit fields alone (``pos``/``dir`` None).
         first: the tangents variables first, (N, *B, 3) and (N, *B), each contiguous (the layout in
             which a ``vmap`` of ``jvp`` over the variables takes them without a copy; the same numbers).
 
@@ -285,6 +300,7 @@ def trace_with_tangents(lens: Lens, rays: Rays, lens_dot: Lens, rays_dot: Rays, 
     steps = []
     shapes = lens.shapes if upto is None else lens.shapes[: upto + 1]
     for s, shape in enumerate(shapes):
+        before = book
         media = (lens.index[s][wl], inv_index[s + 1][wl])
         geo = SurfaceGeometry(lens.curvature[s], lens.conic[s], lens.asphere[s], lens.phase[s], vertex[s],
                               lens.semi_diameter[s])
@@ -294,16 +310,16 @@ def trace_with_tangents(lens: Lens, rays: Rays, lens_dot: Lens, rays_dot: Rays, 
         ray = new
     if upto is None:
         new, book = image_step(vertex[-1], None, ray, book, lens.num_surfaces)
-    else:
-        new = ray
+    else:  # ``trace(…, upto=upto)``'s values: its step onto the surface (no bending) from the same rays
+        new, book, _ = surface_step(upto, steps[upto][2], steps[upto][0], (), before,
+                                    StepMode(shapes[upto], stop_here=True))
     x, y, z, dx, dy, dz = new
     result = RayTrace(pos=torch.stack([x, y, z], -1), dir=torch.stack([dx, dy, dz], -1), status=book.status.long(),
                       backtrack=book.backtrack > 0,
                       hits=tuple(SurfaceHit(*(torch.stack(v, -1) for v in rec[:4]), *rec[4:7])
                                  for _, _, _, rec, _ in steps),
                       failed_at=book.failed_at.long() if upto is None else None)
-    wanted = set(hit_fields(result) if callable(hit_fields) else hit_fields)
-    side = sorted(r for f in wanted - {"dir_in"} for r in _SIDE_ROWS[f])
+    wanted = _per_surface(hit_fields(result) if callable(hit_fields) else hit_fields, len(steps))
     # Pass 2: the tangents, surface by surface.
     vertex_dot = torch.cat([torch.zeros_like(lens_dot.thickness[:1]), torch.cumsum(lens_dot.thickness, 0)])
     inv_index_dot = -(inv_index * inv_index).unsqueeze(-1) * lens_dot.index
@@ -320,8 +336,8 @@ def trace_with_tangents(lens: Lens, rays: Rays, lens_dot: Lens, rays_dot: Rays, 
             return t.contiguous().movedim(-1, 0).contiguous().view(N, *batch, *q)
         return t.reshape(*batch, *q, N)
 
-    def field(f: str, tside: Tensor) -> Tensor:
-        """The tangents of recorded field ``f`` (not dir_in): its rows of ``tside``."""
+    def field(f: str, tside: Tensor, side: list[int]) -> Tensor:
+        """The tangents of recorded field ``f`` (not dir_in): its rows of ``tside`` (the rows ``side``)."""
         at = side.index(_SIDE_ROWS[f][0])  # a field's rows are consecutive in ``side``: a view, no copy
         return lay(tside[:, at:at + len(_SIDE_ROWS[f])])
 
@@ -340,13 +356,15 @@ def trace_with_tangents(lens: Lens, rays: Rays, lens_dot: Lens, rays_dot: Rays, 
         tin = torch.cat([tray, media_dot], 1)
         # The ray's own rows by themselves, the recorded fields apart: the ray's tangents (and so
         # the spot's) have the same bits whichever fields the terms read.
-        tout = _chain(local[:6], tin, 8, e)
+        tout = _chain(local[:6], tin, 8, e) if s != upto else None
+        side = sorted(r for f in wanted[s] - {"dir_in"} for r in _SIDE_ROWS[f])
         tside = _chain([local[r] for r in side], tin, 8, e) if side else None
-        hit_dots.append(SurfaceHit(**{f: (lay(tray[:, 3:6]) if f == "dir_in" else field(f, tside))
-                                      if f in wanted else None for f in sorted(HIT_FIELDS)}))
+        hit_dots.append(SurfaceHit(**{f: (lay(tray[:, 3:6]) if f == "dir_in" else field(f, tside, side))
+                                      if f in wanted[s] else None for f in sorted(HIT_FIELDS)}))
         tray = tout
-    if upto is None:
-        tray = _chain(_image_local(ray, book.ok, vertex[-1], 7), tray, 6, vertex_dot[-1][None])
+    if upto is not None:
+        return result, replace(result, pos=None, dir=None, hits=tuple(hit_dots))
+    tray = _chain(_image_local(ray, book.ok, vertex[-1], 7), tray, 6, vertex_dot[-1][None])
     dot = replace(result, pos=lay(tray[:, 0:3]), dir=lay(tray[:, 3:6]), hits=tuple(hit_dots))
     return result, dot
 
@@ -356,12 +374,12 @@ LEAVES = ("curvature", "conic", "asphere", "phase", "thickness", "index")
 this order, each flattened)."""
 
 
-def stop_partials(lens: Lens, rays: Rays) -> Tensor:
-    """(*B, 3, 6 + L) first derivatives of the hits of ``rays`` on the stop (``trace(lens, rays,
-    upto=lens.stop)``'s positions) with respect to each ray's own position and direction (6 columns)
-    and to the L elements of the lens tensors ``LEAVES`` (flattened, in that order): one differential
-    trace of the rays to the stop with those inputs as its tangent columns. Values of ``lens`` and
-    ``rays`` only (no derivatives through them); a lens on its axis (``supported``)."""
+def stop_partials(lens: Lens, rays: Rays) -> tuple[RayTrace, Tensor]:
+    """``trace(lens, rays, upto=lens.stop)`` (its values, bit for bit) and (*B, 3, 6 + L) the first
+    derivatives of its positions (the hits on the stop) with respect to each ray's own position and
+    direction (6 columns) and to the L elements of the lens tensors ``LEAVES`` (flattened, in that
+    order): one differential trace of the rays to the stop with those inputs as its tangent columns.
+    Values of ``lens`` and ``rays`` only (no derivatives through them); a lens on its axis (``supported``)."""
     pos, dir = torch.broadcast_tensors(rays.pos, rays.dir)
     dtype, device = pos.dtype, pos.device
     leaves = [getattr(lens, name) for name in LEAVES]
@@ -374,6 +392,6 @@ def stop_partials(lens: Lens, rays: Rays) -> Tensor:
                        wavelength_um=torch.zeros(*lens.wavelength_um.shape, N, dtype=dtype, device=device),
                        semi_diameter=torch.zeros(*lens.semi_diameter.shape, N, dtype=dtype, device=device))
     rays_dot = Rays(eye[0:3], eye[3:6], rays.wavelength)
-    _, dot = trace_with_tangents(lens, Rays(pos, dir, rays.wavelength), lens_dot, rays_dot, hit_fields=("pos",),
-                                 upto=lens.stop)
-    return dot.hits[lens.stop].pos
+    result, dot = trace_with_tangents(lens, Rays(pos, dir, rays.wavelength), lens_dot, rays_dot,
+                                      hit_fields=(("pos", lens.stop),), upto=lens.stop)  # the stop's hits alone
+    return result, dot.hits[lens.stop].pos

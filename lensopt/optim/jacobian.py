@@ -27,12 +27,12 @@ import torch
 from torch import Tensor
 
 from lensopt.optics.bundle import Bundle, Launch, finish_bundle
-from lensopt.optics.differential import trace_with_tangents
+from lensopt.optics.differential import Wanted, trace_with_tangents
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.trace import RayTrace
 
 __all__ = ["split", "tangent_leaves", "staged_jacobian", "RampRows", "RampPlan", "take_rays", "take_trace", "take_rows",
-           "place_ramp_rows"]
+           "place_rows"]
 
 
 @dataclass(frozen=True)
@@ -41,10 +41,11 @@ class RampRows:
 
     Attributes:
         name: the term (its block of ℓ: ``Problem.slices[name]``).
-        margin: (lens, bundle) ↦ (B, F, W, P) the term's margins.
+        margin: (lens, bundle) ↦ (B', F, W, P) the term's margins on the blocks with an active row
+            (``Term.margin``'s ``blocks``), in order.
         weight: the term's static weight.
         sqrt_n: √(F·W·P), the residual's divisor.
-        pick: (A,) the active rows among the margins of the selected rays (``RampPlan.rays``), flattened.
+        pick: (A,) the active rows among those margins of the selected rays (``RampPlan.rays``), flattened.
         rows: (A,) the same rows in the term's block of ℓ.
     """
 
@@ -58,15 +59,16 @@ class RampRows:
 
 @dataclass(frozen=True)
 class RampPlan:
-    """How the Jacobian takes the ramp terms at θ: ``given`` their rows of ℓ (constants in stage C: each
-    inactive row's derivative is exactly 0), ``ramps`` the active rows of each term that has any,
-    ``rays`` (K,) the rays (flat F·W·P index) those rows belong to, ``fields`` the recorded hit fields
-    whose derivatives the terms read (``Term.reads``; none for a term without an active row)."""
+    """How the Jacobian takes the ramp terms at θ: ``given`` their rows of ℓ (left out of stage C and
+    placed after it, ``place_rows``: each inactive row's derivative is exactly 0), ``ramps`` the active
+    rows of each term that has any, ``rays`` (K,) the rays (flat F·W·P index) those rows belong to,
+    ``fields`` the recorded hit fields (field, surface) whose derivatives the terms read (``Term.reads``,
+    a ramp term's ``Term.reads_at`` its active blocks; none for a term without an active row)."""
 
     given: dict[str, Tensor]
     ramps: tuple[RampRows, ...]
     rays: Tensor | None
-    fields: frozenset[str]
+    fields: frozenset[tuple[str, int]]
 
 
 def take_rows(x: Tensor | None, lead: torch.Size, rays: Tensor | None, front: int = 0) -> Tensor | None:
@@ -105,18 +107,31 @@ def ramp_tangent_rows(plan: RampPlan, lens: Lens, cut: Bundle | None) -> list[Te
     return [(r.margin(lens, cut).reshape(-1)[r.pick] / r.sqrt_n) * r.weight for r in plan.ramps]
 
 
-def place_ramp_rows(J: Tensor, r: Tensor, size: int, plan: RampPlan, start: dict[str, int]) -> tuple[Tensor, Tensor]:
-    """(J (size, N), ℓ (size,)) from a staged result whose rows after ``size`` are ``ramp_tangent_rows``:
-    those derivatives are put into the terms' rows (``start``: first row of each term's block)."""
-    if not plan.ramps:
+def place_rows(J: Tensor, r: Tensor, plan: RampPlan, slices: dict[str, slice]) -> tuple[Tensor, Tensor]:
+    """(J (M, N), ℓ (M,)) from a staged result (J, r) whose rows are those of the terms of ``slices`` (each
+    term's block of ℓ, in order) but ``plan.given``'s, then ``ramp_tangent_rows``: a given term's rows of
+    ℓ are ``plan.given``'s, of J 0 but for its active rows. J is laid out as ``staged_jacobian`` gives it,
+    variables first (an (M, N) view of an (N, M) tensor): zeros written once rather than carried as the
+    tangents of constants through stage C (most rows of a ramp term are 0)."""
+    if not plan.given:
         return J, r
-    extra, J, r = J[size:], J[:size], r[:size]
+    size = max(sl.stop for sl in slices.values())
+    Jt = J.new_zeros(J.shape[1], size)
+    out = r.new_empty(size)
     pos = 0
+    for name, sl in slices.items():
+        if name in plan.given:
+            out[sl] = plan.given[name]
+            continue
+        n = sl.stop - sl.start
+        Jt[:, sl] = J[pos:pos + n].T
+        out[sl] = r[pos:pos + n]
+        pos += n
     for ramp in plan.ramps:
         n = ramp.rows.numel()
-        J[start[ramp.name] + ramp.rows] = extra[pos:pos + n]
+        Jt[:, slices[ramp.name].start + ramp.rows] = J[pos:pos + n].T
         pos += n
-    return J, r
+    return Jt.T, out
 
 
 def split(obj: Any) -> tuple[list[Tensor], list[Tensor], Callable[[list[Tensor], list[Tensor]], Any]]:
@@ -177,13 +192,14 @@ def tangent_leaves(primal: Any, tangent: Any) -> list[Tensor | None]:
 
 def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_of: Callable[[Lens], Launch],
                     terms_of: Callable[[Tensor, Lens, Bundle, Bundle | None], Tensor],
-                    hit_fields: Callable[[Lens, Bundle], Collection[str]], system: System,
+                    hit_fields: Callable[[Lens, Bundle], Collection[Wanted]], system: System,
                     rays: Callable[[], Tensor | None] = lambda: None) -> tuple[Tensor, Tensor]:
     """(J (M, N), ℓ (M,)) at θ by stages A, B, C (module docstring), for the residual function
     θ ↦ ``terms_of(θ, lens, bundle, cut)`` with ``lens = lens_of(θ)``, ``launch = launch_of(lens)``,
     ``bundle = finish_bundle(system, launch, trace(lens, launch.rays, record=True))``;
-    ``hit_fields(lens, bundle)``: the recorded hit fields whose derivatives the terms read
-    (``Term.reads``), at the primal lens and traced bundle (called once, before ``terms_of``);
+    ``hit_fields(lens, bundle)``: the recorded hit fields whose derivatives the terms read (names, or
+    (name, surface) pairs: ``differential.Wanted``), at the primal lens and traced bundle (called once,
+    before ``terms_of``);
     ``rays()`` (called after ``hit_fields``): the rays (K,) (flat F·W·P indices) of ``cut``, the bundle
     cut to them (``take_rays``; None: ``cut`` is None). The cut is made on the trace and its tangents
     before stage C (an index copy of plain tensors, not of duals), or is a view when ``rays`` are all
@@ -201,7 +217,7 @@ def staged_jacobian(theta: Tensor, *, lens_of: Callable[[Tensor], Lens], launch_
     lens, start = rebuild_a(list(fl_a), list(ot_a))
     lens_dot, start_dot = rebuild_a(list(dots_a), list(ot_a))
 
-    def reads(result: RayTrace) -> Collection[str]:
+    def reads(result: RayTrace) -> Collection[Wanted]:
         holder["bundle"] = finish_bundle(system, start, result)  # the primal bundle, kept for the cut
         return hit_fields(lens, holder["bundle"])
 

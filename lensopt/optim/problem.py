@@ -34,7 +34,7 @@ from lensopt.optics.paraxial import first_order
 from lensopt.optics.sampling import PupilSampling
 from lensopt.optim import residuals
 from lensopt.optim.image_objective import ImageObjective
-from lensopt.optim.jacobian import RampPlan, RampRows, place_ramp_rows, ramp_tangent_rows, staged_jacobian
+from lensopt.optim.jacobian import RampPlan, RampRows, place_rows, ramp_tangent_rows, staged_jacobian
 from lensopt.optim.rays import head, with_rim
 from lensopt.optim.schedule import schedule_weight
 from lensopt.optim.settings import ImageSettings, OptimizeSettings
@@ -315,9 +315,7 @@ class Problem:
         return self._terms(theta, lens, self.bundle(lens))
 
     def _context(self, theta: Tensor, lens: Lens, bundle: Bundle) -> TermContext:
-        spot = head(bundle, self.num_spot)
-        stats = spot_stats(spot, self.system.wavelength_weights, self.field_weights)
-        return TermContext(self.term_setup, theta, lens, bundle, spot, stats)
+        return TermContext(self.term_setup, theta, lens, bundle, head(bundle, self.num_spot))
 
     def _terms(self, theta: Tensor, lens: Lens, bundle: Bundle,
                given: dict[str, Tensor] | None = None) -> dict[str, Tensor]:
@@ -341,19 +339,19 @@ class Problem:
         valid = bundle.result.valid
         n_r = valid.numel()
         given: dict[str, Tensor] = {}
-        fields: set[str] = set()
+        fields: set[tuple[str, int]] = set()
+        everywhere = lambda names: {(f, s) for f in names for s in range(lens.num_surfaces)}  # noqa: E731
         found = []
         for t in TERMS:
             w = t.weight(self.term_setup)
             if w is None:
                 continue
             if t.margin is None:
-                fields.update(t.reads(bundle))
+                fields.update(everywhere(t.reads(bundle)))
                 continue
             given[t.name] = t.residual(ctx) * w
             act = residuals.active(t.margin(self.term_setup, lens, bundle), valid).reshape(-1, n_r)
             if bool(act.any()):
-                fields.update(t.reads(bundle))
                 found.append((t, w, act))
         if not found:
             return RampPlan(given, (), None, frozenset(fields))
@@ -361,8 +359,12 @@ class Problem:
         ramps = []
         for t, w, act in found:
             b, k = act[:, rays].nonzero(as_tuple=True)
-            ramps.append(RampRows(t.name, functools.partial(t.margin, self.term_setup), w, math.sqrt(n_r),
-                                  b * rays.numel() + k, b * n_r + rays[k]))
+            blocks = torch.unique(b)  # sorted: the margins are taken on these blocks alone
+            fields.update(t.reads_at(self.term_setup, lens, blocks.tolist()) if t.reads_at
+                          else everywhere(t.reads(bundle)))
+            margin = functools.partial(t.margin, self.term_setup, blocks=blocks.tolist())
+            ramps.append(RampRows(t.name, margin, w, math.sqrt(n_r), torch.searchsorted(blocks, b) * rays.numel() + k,
+                                  b * n_r + rays[k]))
         return RampPlan(given, tuple(ramps), rays, frozenset(fields))
 
     def residuals(self, theta: Tensor) -> Tensor:
@@ -374,24 +376,25 @@ class Problem:
         apply, else ``torch.func.jacfwd`` over the whole residual function (the same derivatives)."""
         if self.image is not None or not supported(self.setup.lens):
             return self.jacobian_jacfwd(theta)
-        # Ramp terms (``Term.margin``) enter stage C as constants; the derivatives of their active rows
-        # (on the aimed studies ≤ 10 % of them, often none) are taken on those rows' rays alone and
-        # put in place; every other row of theirs has a derivative of exactly 0. The trace's
-        # derivatives skip the hit fields that only terms without an active row read.
+        # Ramp terms (``Term.margin``) stay out of stage C (their rows of ℓ are the plan's); the
+        # derivatives of their active rows (on the aimed studies ≤ 10 % of them, often none) are taken
+        # on those rows' rays and blocks alone and put in place (``place_rows``); every other row of
+        # theirs has a derivative of exactly 0. The trace differentiates only the hits the terms read.
         plan: list[RampPlan] = []
 
-        def hit_fields(lens: Lens, bundle: Bundle) -> frozenset[str]:
+        def hit_fields(lens: Lens, bundle: Bundle) -> frozenset[tuple[str, int]]:
             plan.append(self.ramp_plan(theta.detach(), lens, bundle))
             return plan[0].fields
 
         def terms_of(t: Tensor, lens: Lens, bundle: Bundle, cut: Bundle | None) -> Tensor:
-            parts = list(self._terms(t, lens, bundle, plan[0].given).values())
-            return torch.cat(parts + ramp_tangent_rows(plan[0], lens, cut))
+            parts = [v for name, v in self._terms(t, lens, bundle, plan[0].given).items() if name not in plan[0].given]
+            parts += ramp_tangent_rows(plan[0], lens, cut)
+            return torch.cat(parts) if parts else t[:0]  # no row: still one of θ's (J (0, N) under vmap)
 
         J, r = staged_jacobian(theta, lens_of=lambda t: self.lens(t)[0],
                                launch_of=lambda lens: self.launch(lens, theta), terms_of=terms_of,
                                hit_fields=hit_fields, system=self.system, rays=lambda: plan[0].rays)
-        return place_ramp_rows(J, r, self.size, plan[0], {name: sl.start for name, sl in self.slices.items()})
+        return place_rows(J, r, plan[0], self.slices)
 
     def jacobian_jacfwd(self, theta: Tensor) -> tuple[Tensor, Tensor]:
         """(M, N) Jacobian by ``torch.func.jacfwd`` over ``residuals`` and ℓ(θ) (M,): the reference."""

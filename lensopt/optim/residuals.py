@@ -8,13 +8,13 @@ ramp(x) = max(x, 0). n_r = F·W·P rays; lengths in mm.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import torch
 from torch import Tensor
 
-from lensopt.analysis.distortion import distortion as distortion_per_field
+from lensopt.analysis.distortion import centroid_distortion
 from lensopt.analysis.illumination import relative_illumination_std
-from lensopt.analysis.spot import SpotStats
 from lensopt.optics.bundle import Bundle
 from lensopt.optics.lens import Lens, System
 from lensopt.optics.trace import RayTrace
@@ -48,15 +48,16 @@ def _ramp(x: Tensor) -> Tensor:
     return torch.clamp_min(x, 0.0)
 
 
-def tra(bundle: Bundle, stats: SpotStats, wavelength_weights: Tensor, field_weights: Tensor) -> Tensor:
-    """(2 n_r,) transverse ray aberrations about each field's weighted centroid (S37–S39).
+def tra(bundle: Bundle, centroid: Tensor, wavelength_weights: Tensor, field_weights: Tensor) -> Tensor:
+    """(2 n_r,) transverse ray aberrations about each field's weighted centroid ``centroid`` (F, 2)
+    (``analysis.spot.spot_centroid``) (S37–S39).
 
     Every ray of field h, wavelength w is weighted by sqrt(f_h/Σf · W_w/ΣW / P), so that with no
     failed rays ‖ℓ_TRA‖² = Σ_h f̂_h SR_h² = ESR² (S40 generalized to weights).
     """
     res = bundle.result
     F, W, P = res.status.shape
-    xy = res.pos[..., :2] - stats.centroid[:, None, None, :]
+    xy = res.pos[..., :2] - centroid[:, None, None, :]
     ww = wavelength_weights.to(xy.dtype) / wavelength_weights.sum()
     fw = field_weights.to(xy.dtype) / field_weights.sum()
     scale = torch.sqrt(fw[:, None, None] * ww[None, :, None] / P)
@@ -64,11 +65,15 @@ def tra(bundle: Bundle, stats: SpotStats, wavelength_weights: Tensor, field_weig
     return d.reshape(-1)
 
 
-def gap_lengths(bundle: Bundle) -> Tensor:
+def gap_lengths(bundle: Bundle, gaps: Sequence[int] | None = None) -> Tensor:
     """(S, F, W, P) axial distance t_z each ray travels in the gap after every surface (needs a
-    bundle traced with ``record=True``); the last gap ends on the image surface."""
+    bundle traced with ``record=True``); the last gap ends on the image surface. ``gaps``: (G, F, W, P)
+    those gaps only, in that order (the same numbers as their rows of all S)."""
     res = bundle.result
-    z = torch.stack([h.pos[..., 2] for h in res.hits] + [res.pos[..., 2]])
+    z = [h.pos[..., 2] for h in res.hits] + [res.pos[..., 2]]
+    if gaps is not None:
+        return torch.stack([z[g + 1] - z[g] for g in gaps]) if gaps else res.pos.new_zeros((0, *res.status.shape))
+    z = torch.stack(z)
     return z[1:] - z[:-1]
 
 
@@ -85,9 +90,12 @@ def active(margin: Tensor, valid: Tensor) -> Tensor:
     return (margin >= 0) & valid
 
 
-def ray_path_margin(bundle: Bundle, lower: Tensor, upper: Tensor) -> Tensor:
-    """(S, F, W, P) how far each ray's axial path per gap is outside [lower, upper] (mm; < 0 inside)."""
-    tz = gap_lengths(bundle)
+def ray_path_margin(bundle: Bundle, lower: Tensor, upper: Tensor, gaps: Sequence[int] | None = None) -> Tensor:
+    """(S, F, W, P) how far each ray's axial path per gap is outside [lower, upper] (mm; < 0 inside);
+    ``gaps``: (G, F, W, P) those gaps' rows only (``gap_lengths``)."""
+    tz = gap_lengths(bundle, gaps)
+    if gaps is not None:
+        lower, upper = lower[list(gaps)], upper[list(gaps)]
     lo, hi = lower[:, None, None, None], upper[:, None, None, None]
     return torch.maximum(tz - hi, lo - tz)
 
@@ -113,9 +121,13 @@ def ray_path_spans(bundle: Bundle, spans: list[tuple[int, int, float, float]]) -
 
 def ray_path_span_margin(bundle: Bundle, spans: list[tuple[int, int, float, float]]) -> Tensor:
     """(K, F, W, P) ``ray_path_spans``' margins: max(t − upper, lower − t) per span and ray (mm)."""
-    tz = gap_lengths(bundle)
-    out = [torch.maximum(tz[a:b].sum(0) - hi, lo - tz[a:b].sum(0)) for a, b, lo, hi in spans]
-    return torch.stack(out) if out else tz.new_zeros((0, *tz.shape[1:]))
+    if not spans:
+        return bundle.result.pos.new_zeros((0, *bundle.result.status.shape))
+    first = min(a for a, _, _, _ in spans)
+    tz = gap_lengths(bundle, range(first, max(b for _, b, _, _ in spans)))  # the gaps the spans cover
+    out = [torch.maximum(tz[a - first:b - first].sum(0) - hi, lo - tz[a - first:b - first].sum(0))
+           for a, b, lo, hi in spans]
+    return torch.stack(out)
 
 
 def _valid_ramp_rows(res: RayTrace, margin: Tensor) -> Tensor:
@@ -133,14 +145,16 @@ def ray_angle(bundle: Bundle, surfaces: list[int], max_deg: float) -> Tensor:
     return _valid_ramp_rows(res, ray_angle_margin(bundle, surfaces, max_deg))
 
 
-def ray_angle_margin(bundle: Bundle, surfaces: list[int], max_deg: float) -> Tensor:
-    """(2 I, F, W, P) ``ray_angle``'s margins cos²θmax − ζ, incidence and refraction of each surface."""
+def ray_angle_margin(bundle: Bundle, surfaces: list[int], max_deg: float,
+                     blocks: Sequence[int] | None = None) -> Tensor:
+    """(2 I, F, W, P) ``ray_angle``'s margins cos²θmax − ζ, incidence and refraction of each surface
+    (block 2i, 2i + 1 of ``surfaces[i]``); ``blocks``: (B, F, W, P) those blocks only, in that order."""
     res = bundle.result
     c2 = math.cos(math.radians(max_deg)) ** 2
     out = []
-    for s in surfaces:
-        h = res.hits[s]
-        out += [c2 - h.cos2_in, c2 - h.cos2_out]
+    for b in range(2 * len(surfaces)) if blocks is None else blocks:
+        h = res.hits[surfaces[b // 2]]
+        out.append(c2 - (h.cos2_out if b % 2 else h.cos2_in))
     return torch.stack(out) if out else res.pos.new_zeros((0, *res.status.shape))
 
 
@@ -152,18 +166,23 @@ def surface_normal(bundle: Bundle, surfaces: list[int], max_deg: float) -> Tenso
     return _valid_ramp_rows(res, surface_normal_margin(bundle, surfaces, max_deg))
 
 
-def surface_normal_margin(bundle: Bundle, surfaces: list[int], max_deg: float) -> Tensor:
-    """(I, F, W, P) ``surface_normal``'s margins cos²θmax − n_z²."""
+def surface_normal_margin(bundle: Bundle, surfaces: list[int], max_deg: float,
+                          blocks: Sequence[int] | None = None) -> Tensor:
+    """(I, F, W, P) ``surface_normal``'s margins cos²θmax − n_z²; ``blocks``: (B, F, W, P) those of
+    ``surfaces[b]`` for b in ``blocks`` only, in that order."""
     res = bundle.result
     c2 = math.cos(math.radians(max_deg)) ** 2
+    if blocks is not None:
+        surfaces = [surfaces[b] for b in blocks]
     if not surfaces:
         return res.pos.new_zeros((0, *res.status.shape))
     return c2 - torch.stack([res.hits[s].normal[..., 2] ** 2 for s in surfaces])
 
 
-def distortion(lens: Lens, system: System, bundle: Bundle, stats: SpotStats, max_fraction: float) -> Tensor:
-    """(F,) distortion residuals (S48–S50): ramp(|D_h| − D_max)/√n_h, D as a fraction."""
-    d = distortion_per_field(lens, system, bundle, stats)
+def distortion(lens: Lens, system: System, bundle: Bundle, centroid: Tensor, max_fraction: float) -> Tensor:
+    """(F,) distortion residuals (S48–S50): ramp(|D_h| − D_max)/√n_h, D as a fraction; ``centroid``:
+    (F, 2) the fields' spot centroids."""
+    d = centroid_distortion(lens, system, bundle, centroid)
     return _ramp(d.abs() - max_fraction) / math.sqrt(d.shape[0])
 
 

@@ -12,14 +12,15 @@ To add a term: write its residual function (pure tensors, fixed length, DESIGN.m
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection
+import functools
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import torch
 from torch import Tensor
 
-from lensopt.analysis.spot import SpotStats
+from lensopt.analysis.spot import SpotStats, spot_centroid, spot_stats
 from lensopt.materials.glass_space import GlassMesh, GlassSpace, catalog_distance, mesh_distance
 from lensopt.optics.bundle import Bundle
 from lensopt.optics.differential import HIT_FIELDS
@@ -80,7 +81,11 @@ class TermContext:
         theta: (N,) variables.
         lens: the solved lens of θ.
         bundle: every optimization ray (spot sample + rim rays), traced with ``record=True``.
-        spot: the spot sample part of ``bundle``; stats: its spot statistics.
+        spot: the spot sample part of ``bundle``.
+
+    Computed on first use (the Jacobian's stage C carries N tangents through every operation, so
+    what no term reads is not computed): ``stats`` the spot statistics of ``spot``, ``centroid`` (F, 2)
+    their centroids alone (the same numbers).
     """
 
     setup: TermSetup
@@ -88,7 +93,14 @@ class TermContext:
     lens: Lens
     bundle: Bundle
     spot: Bundle
-    stats: SpotStats
+
+    @functools.cached_property
+    def stats(self) -> SpotStats:
+        return spot_stats(self.spot, self.setup.system.wavelength_weights, self.setup.field_weights)
+
+    @functools.cached_property
+    def centroid(self) -> Tensor:
+        return spot_centroid(self.spot, self.setup.system.wavelength_weights)
 
 
 @dataclass(frozen=True)
@@ -103,10 +115,15 @@ class Term:
         config: setup ↦ the settings object of the term (its ``schedule`` is used), or None.
         reads: bundle ↦ the fields of the recorded hits (``SurfaceHit``) whose derivatives the
             residual needs at this bundle (``optim.jacobian`` computes only those); all by default.
-        margin: for a ramp term, (setup, lens, bundle) ↦ (B, F, W, P) its margins m, such that the
-            residual is ``where(valid, ramp(m), 0)`` flattened, divided by √(F·W·P) (block b, ray k
+        margin: for a ramp term, (setup, lens, bundle, blocks) ↦ (B, F, W, P) its margins m, such that
+            the residual is ``where(valid, ramp(m), 0)`` flattened, divided by √(F·W·P) (block b, ray k
             is row b·F·W·P + k): its derivative is 0 wherever m < 0 (``residuals.inactive``), so the
-            Jacobian differentiates the active rows alone (``Problem.jacobian``). None: every row.
+            Jacobian differentiates the active rows alone (``Problem.jacobian``). ``blocks`` (sorted;
+            None: all): the margins of those blocks only, in that order, the same numbers as their
+            blocks of all (the Jacobian takes the blocks with an active row). None: every row.
+        reads_at: for a ramp term, (setup, lens, blocks) ↦ the recorded hits (field, surface) whose
+            derivatives its margins on ``blocks`` read (``optim.jacobian`` computes only those); None:
+            ``reads`` at every surface.
     """
 
     name: str
@@ -115,7 +132,8 @@ class Term:
     residual: Callable[[TermContext], Tensor]
     config: Callable[[TermSetup], Any] = lambda s: None
     reads: Callable[[Bundle], Collection[str]] = lambda b: HIT_FIELDS
-    margin: Callable[[TermSetup, Lens, Bundle], Tensor] | None = None
+    margin: Callable[[TermSetup, Lens, Bundle, Sequence[int] | None], Tensor] | None = None
+    reads_at: Callable[[TermSetup, Lens, Sequence[int]], Collection[tuple[str, int]]] | None = None
 
 
 def _cons(name: str) -> Callable[[TermSetup], Any]:
@@ -156,25 +174,46 @@ def _nothing(bundle: Bundle) -> Collection[str]:
     return ()
 
 
-def _ray_path_margin(s: TermSetup, lens: Lens, bundle: Bundle) -> Tensor:
-    gaps = res.ray_path_margin(bundle, *s.gap_bounds(lens))
-    if not s.path_spans:
-        return gaps
-    return torch.cat([gaps, res.ray_path_span_margin(bundle, list(s.path_spans))])
+def _ray_path_margin(s: TermSetup, lens: Lens, bundle: Bundle, blocks: Sequence[int] | None = None) -> Tensor:
+    """Blocks 0 … S − 1 the gaps, then one per span."""
+    S = lens.num_surfaces
+    gaps = None if blocks is None else [b for b in blocks if b < S]
+    spans = list(s.path_spans) if blocks is None else [s.path_spans[b - S] for b in blocks if b >= S]
+    out = res.ray_path_margin(bundle, *s.gap_bounds(lens), gaps)
+    if not spans:
+        return out
+    return torch.cat([out, res.ray_path_span_margin(bundle, spans)])
 
 
-def _ray_angle_margin(s: TermSetup, lens: Lens, bundle: Bundle) -> Tensor:
-    return res.ray_angle_margin(bundle, list(s.interfaces), s.settings.constraints.ray_angle.max_deg)
+def _ray_path_reads(s: TermSetup, lens: Lens, blocks: Sequence[int]) -> set[tuple[str, int]]:
+    """The hit positions the gaps and spans of ``blocks`` read: each one's, from its start to its end
+    surface (the image's is the end of the trace, always differentiated)."""
+    S = lens.num_surfaces
+    ends = [(b, b + 1) if b < S else s.path_spans[b - S][:2] for b in blocks]
+    return {("pos", j) for first, stop in ends for j in range(first, stop + 1) if j < S}
 
 
-def _surface_normal_margin(s: TermSetup, lens: Lens, bundle: Bundle) -> Tensor:
-    return res.surface_normal_margin(bundle, list(s.refracting), s.settings.constraints.surface_normal.max_deg)
+def _ray_angle_margin(s: TermSetup, lens: Lens, bundle: Bundle, blocks: Sequence[int] | None = None) -> Tensor:
+    return res.ray_angle_margin(bundle, list(s.interfaces), s.settings.constraints.ray_angle.max_deg, blocks)
+
+
+def _ray_angle_reads(s: TermSetup, lens: Lens, blocks: Sequence[int]) -> set[tuple[str, int]]:
+    return {("cos2_out" if b % 2 else "cos2_in", s.interfaces[b // 2]) for b in blocks}
+
+
+def _surface_normal_reads(s: TermSetup, lens: Lens, blocks: Sequence[int]) -> set[tuple[str, int]]:
+    return {("normal", s.refracting[b]) for b in blocks}
+
+
+def _surface_normal_margin(s: TermSetup, lens: Lens, bundle: Bundle, blocks: Sequence[int] | None = None) -> Tensor:
+    return res.surface_normal_margin(bundle, list(s.refracting), s.settings.constraints.surface_normal.max_deg,
+                                     blocks)
 
 
 TERMS: tuple[Term, ...] = (
     Term("tra", "transverse ray aberrations about the field centroids, ‖ℓ‖ = ESR (S37–S39)",
          lambda s: s.settings.tra.weight if s.objective == "spot" and s.settings.tra.weight > 0 else None,
-         lambda c: res.tra(c.spot, c.stats, c.setup.system.wavelength_weights, c.setup.field_weights),
+         lambda c: res.tra(c.spot, c.centroid, c.setup.system.wavelength_weights, c.setup.field_weights),
          lambda s: s.settings.tra, _nothing),
     Term("wavefront", "RMS wavefront error per field and wavelength, waves, piston and tilt removed",
          lambda s: None if s.settings.wavefront is None else s.settings.wavefront.weight,
@@ -186,16 +225,19 @@ TERMS: tuple[Term, ...] = (
     Term("image_loss", "√(2 L) of the image loss (scalar, for Adam)", _image_weight("scalar"),
          lambda c: c.setup.image.scalar(c.lens)),
     Term("ray_path", "axial ray path per gap (and per span of gaps) within its bounds (S41–S42)",
-         _cons_weight("ray_path"), _ray_path, _cons("ray_path"), lambda b: ("pos",), _ray_path_margin),
+         _cons_weight("ray_path"), _ray_path, _cons("ray_path"), lambda b: ("pos",), _ray_path_margin,
+         _ray_path_reads),
     Term("ray_angle", "angles of incidence and refraction (S43–S45)", _cons_weight("ray_angle"),
          lambda c: res.ray_angle(c.bundle, list(c.setup.interfaces), c.setup.settings.constraints.ray_angle.max_deg),
-         _cons("ray_angle"), lambda b: ("cos2_in", "cos2_out"), _ray_angle_margin),
+         _cons("ray_angle"), lambda b: ("cos2_in", "cos2_out"), _ray_angle_margin,
+         _ray_angle_reads),
     Term("surface_normal", "surface normal angles where rays hit (S46–S47)", _cons_weight("surface_normal"),
          lambda c: res.surface_normal(c.bundle, list(c.setup.refracting),
                                       c.setup.settings.constraints.surface_normal.max_deg),
-         _cons("surface_normal"), lambda b: ("normal",), _surface_normal_margin),
+         _cons("surface_normal"), lambda b: ("normal",), _surface_normal_margin,
+         _surface_normal_reads),
     Term("distortion", "distortion per field (S48–S50)", _cons_weight("distortion"),
-         lambda c: res.distortion(c.lens, c.setup.system, c.spot, c.stats,
+         lambda c: res.distortion(c.lens, c.setup.system, c.spot, c.centroid,
                                   c.setup.settings.constraints.distortion.max_percent / 100),
          _cons("distortion"), _nothing),
     Term("relative_illumination", "relative illumination per field (S52–S54)", _cons_weight("relative_illumination"),

@@ -73,3 +73,16 @@ def test_gauss_converges_to_a_dense_grid_on_a_real_lens() -> None:
     torch.testing.assert_close(r16, rg, rtol=3e-4, atol=0)  # grid:101 is 1.3e-3 off: not sharper
     ri16, rig = relative_illumination_std(g16, ww), relative_illumination_std(grid, ww)
     torch.testing.assert_close(ri16, rig, rtol=1e-4, atol=0)
+
+
+@pytest.mark.parametrize("text", ["gauss:4", "rings:6"])
+def test_the_centroids_alone_are_the_statistics_centroids(text: str) -> None:
+    # ``spot_centroid`` (what the residual terms read) is ``spot_stats``' centroid, computed alone: the same
+    # numbers with quadrature weights and without, on and off axis (a half pupil: x̄ = 0).
+    from lensopt.analysis.spot import spot_centroid
+
+    model, b = _bundle(text, [0.0, 0.7, 1.0])
+    assert (b.pupil_weights is not None) == text.startswith("gauss")
+    c = spot_centroid(b, model.system.wavelength_weights)
+    assert torch.equal(c, spot_stats(b, model.system.wavelength_weights).centroid)
+    assert float(c[1:, 1].abs().min()) > 0

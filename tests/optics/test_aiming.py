@@ -3,6 +3,8 @@ real aperture stop. Checked by re-tracing the aimed rays to the stop with the pl
 
 from __future__ import annotations
 
+import dataclasses
+
 import torch
 
 from lensopt.optics.bundle import trace_bundle
@@ -44,3 +46,26 @@ def test_aiming_offsets_are_zero_on_axis_and_follow_the_system(cooke) -> None:
     # Off-axis fields need a non-zero shift; wavelengths differ (pupil chromatism) but stay close.
     off = bundle.aim.offset[1:]
     assert bool((off.abs() > 0).all())
+
+
+def test_stop_radius_takes_the_callers_paraxial_fallback_with_the_same_numbers(cooke) -> None:
+    # ``stop_radius(…, paraxial_mm=)``: the caller's first-order stop semi-diameter instead of a second
+    # paraxial trace. The real marginal ray's height where it reaches the stop, the paraxial one where it
+    # is lost (an entrance pupil 8× too large: the marginal ray misses a front element), the same
+    # numbers and first derivatives (in the lens thicknesses) either way.
+    from lensopt.optics.aiming import stop_radius
+
+    lens, system = cooke.lens, cooke.system
+    fo = first_order(lens, system)
+    for scale, lost in ((1.0, False), (8.0, True)):
+        def radius(thickness: torch.Tensor, given: bool, scale: float = scale) -> torch.Tensor:
+            moved = dataclasses.replace(lens, thickness=thickness)
+            f = first_order(moved, system)
+            return stop_radius(moved, system, epd=scale * f.epd, entrance_pupil_z=f.entrance_pupil_z,
+                               paraxial_mm=f.stop_semi_diameter if given else None)
+
+        at, along = (lens.thickness,), (torch.ones_like(lens.thickness),)
+        plain, d_plain = torch.func.jvp(lambda t: radius(t, False), at, along)
+        given, d_given = torch.func.jvp(lambda t: radius(t, True), at, along)
+        assert torch.equal(plain, given) and torch.equal(d_plain, d_given) and float(d_plain) != 0
+        assert torch.equal(plain, fo.stop_semi_diameter) == lost

@@ -107,6 +107,32 @@ def test_only_the_requested_hit_fields_get_tangents() -> None:
 
 
 @pytest.mark.parametrize("case", list(CASES))
+def test_hit_fields_asked_for_at_some_surfaces_get_tangents_there_alone(case: str) -> None:
+    # (field, surface) pairs: that field's tangents at that surface alone (a ramp term's active blocks
+    # read a few hits); a bare name: every surface; a surface beyond the lens: nothing. The same numbers
+    # as the full set's: bit for bit where the chain's batched product runs on BLAS either way; a small
+    # one (rows × 8 × N < 400: the Cooke case's single row) takes ATen's plain loop, to rounding. The
+    # ray's own tangents keep their bits.
+    path, scale = CASES[case]
+    lens_of, rays_of, theta = _setup(path, scale)
+    lens, rays, lens_dot, rays_dot = _tangents(lens_of, rays_of, theta)
+    _, full = trace_with_tangents(lens, rays, lens_dot, rays_dot)
+    S = lens.num_surfaces
+    wanted = [("pos", 1), ("normal", S - 1), ("pos", S - 1), "cos2_in", ("t", S + 3)]
+    _, part = trace_with_tangents(lens, rays, lens_dot, rays_dot, hit_fields=wanted, first=True)
+    expect = {(f, s): f == "cos2_in" or (f, s) in wanted for f in HIT_FIELDS for s in range(S)}
+    assert sum(expect.values()) == S + 3
+    for (f, s), there in expect.items():
+        have, want = getattr(part.hits[s], f), getattr(full.hits[s], f)
+        assert (have is not None) == there, (f, s)
+        if there:
+            want = want.movedim(-1, 0)
+            small = case.startswith("Cooke")
+            assert torch.equal(have, want) or small and torch.allclose(have, want, rtol=1e-14, atol=0), (f, s)
+    assert torch.equal(part.pos, full.pos.movedim(-1, 0)) and torch.equal(part.dir, full.dir.movedim(-1, 0))
+
+
+@pytest.mark.parametrize("case", list(CASES))
 def test_tangents_variables_first_are_the_same_numbers(case: str) -> None:
     # ``first=True`` (stage C's layout: (N, *B, …), contiguous) chains each recorded field by itself:
     # the same bits as the default layout's tangents (held against jacfwd above), moved.
@@ -168,6 +194,26 @@ def test_attached_stop_hit_is_the_trace_to_the_stop_in_value_and_derivative(case
         scale_k = float(want.abs().max())
         assert scale_k > 0
         assert float((want - have).abs().max()) <= 1e-12 * scale_k
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_stop_partials_trace_is_the_trace_to_the_stop(case: str) -> None:
+    # ``stop_partials`` returns the trace to the stop it differentiates (``attached_stop_hit`` takes its
+    # values from there instead of tracing again): bit for bit ``trace(…, upto=stop)``, the rays lost
+    # before the stop (overfilled Cooke) and their status included; its partials are those of the stop
+    # hits, held against jacfwd above.
+    from lensopt.optics.differential import stop_partials
+
+    path, scale = CASES[case]
+    lens_of, rays_of, theta = _setup(path, scale)
+    lens, rays = lens_of(theta), rays_of(theta)
+    ref = trace(lens, rays, upto=lens.stop)
+    hit, partials = stop_partials(lens, rays)
+    for name in ("pos", "dir", "status", "backtrack"):
+        assert torch.equal(getattr(hit, name), getattr(ref, name)), name
+    assert hit.failed_at is None and partials.shape[:-1] == (*ref.status.shape, 3)
+    if case.startswith("Cooke"):
+        assert 0 < int(ref.valid.sum()) < ref.valid.numel()
 
 
 def test_attached_stop_hit_under_vmap_is_the_plain_trace_without_a_fallback_loop() -> None:

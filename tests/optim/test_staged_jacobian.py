@@ -89,7 +89,7 @@ def test_ramp_terms_differentiate_their_active_rows_alone() -> None:
     lens, _ = p.lens(theta)
     plan = p.ramp_plan(theta, lens, p.bundle(lens))
     assert {"ray_path", "ray_angle"} <= set(plan.given) and not plan.ramps
-    assert not {"cos2_in", "cos2_out", "pos"} & plan.fields
+    assert not {"cos2_in", "cos2_out", "pos"} & {f for f, _ in plan.fields}
     for max_deg, some in ((59.9, False), (20.0, True)):
         data["optimize"]["constraints"]["ray_angle"]["max_deg"] = max_deg
         p = build_problem(parse_spec(data))
@@ -183,3 +183,85 @@ def test_rays_cut_before_stage_c_equal_rays_cut_inside() -> None:
         assert J.shape == (p.num_variables + rays.numel() * 13, p.num_variables)
         assert torch.equal(r, r_in) and torch.equal(J, J_in)
         assert float(J[p.num_variables:].abs().max()) > 0
+
+
+def test_ramp_margins_on_some_blocks_are_those_blocks_of_all() -> None:
+    # The Jacobian takes a ramp term's margins on the blocks with an active row alone (``Term.margin``'s
+    # ``blocks``): they must be the same numbers, and the same derivatives, as those blocks of all the
+    # margins. The telephoto study has gaps, a span, interfaces and aspheres; at its start the plan
+    # takes a strict subset of each term's blocks (so test_staged_jacobian_equals_jacfwd_on_the_studies
+    # holds the cut margins against jacfwd of the whole ℓ).
+    from lensopt.optim.terms import term
+
+    p = build_problem(parse_spec(_study("telephoto_5p_tr080.toml")))
+    theta = p.theta0
+    lens, _ = p.lens(theta)
+    bundle = p.bundle(lens)
+    plan = p.ramp_plan(theta, lens, bundle)
+    g = torch.Generator().manual_seed(1)
+    for name in ("ray_path", "ray_angle", "surface_normal"):
+        margin = term(name).margin
+        whole = margin(p.term_setup, lens, bundle, None)
+        assert name != "ray_path" or whole.shape[0] == lens.num_surfaces + 1  # the gaps and the span
+        some = torch.randperm(whole.shape[0], generator=g)[:3].sort().values.tolist()
+        for blocks in ([0], [whole.shape[0] - 1], some, list(range(whole.shape[0]))):
+            assert torch.equal(margin(p.term_setup, lens, bundle, blocks), whole[blocks]), (name, blocks)
+    for ramp in plan.ramps:
+        assert ramp.margin(lens, bundle).shape[0] < term(ramp.name).margin(p.term_setup, lens, bundle, None).shape[0]
+    # Only the hits those blocks read are differentiated (``Term.reads_at``): a few of each field.
+    for f in ("pos", "normal"):
+        assert 0 < len({s for g, s in plan.fields if g == f}) < lens.num_surfaces - 2
+    # The derivatives too: jvp along one direction of θ through the lens and the trace.
+    direction = torch.linspace(-1, 1, p.num_variables, dtype=torch.float64)
+
+    def margins(t: torch.Tensor, blocks: list[int] | None) -> torch.Tensor:
+        lens_t, _ = p.lens(t)
+        return term("ray_path").margin(p.term_setup, lens_t, p.bundle(lens_t), blocks)
+
+    _, whole_dot = torch.func.jvp(lambda t: margins(t, None), (theta,), (direction,))
+    blocks = [0, 5, lens.num_surfaces - 1, lens.num_surfaces]
+    _, some_dot = torch.func.jvp(lambda t: margins(t, blocks), (theta,), (direction,))
+    assert torch.equal(some_dot, whole_dot[blocks]) and float(some_dot.abs().max()) > 0
+
+
+@pytest.mark.parametrize("ramps", [False, True])
+def test_rows_placed_after_stage_c_are_the_whole_residual_functions(ramps: bool) -> None:
+    # Stage C leaves the ramp terms out (their rows of ℓ come from the plan, their rows of J are 0 but
+    # for the active ones, ``place_rows``). Without a ramp term J is stage C's as it is; with ramp terms
+    # between other terms (ray angle and surface normal before distortion and illumination) every
+    # term's rows must land in its block: ℓ bit for bit, J to rounding against jacfwd, and J laid out
+    # variables first as stage C gives it (what LM's column norms and row selection read).
+    from tests.helpers import small_problem_data
+
+    data = small_problem_data()
+    if ramps:
+        data["optimize"]["constraints"] |= {"ray_angle": {"max_deg": 25.0}, "surface_normal": {"max_deg": 20.0}}
+    p = build_problem(parse_spec(data))
+    theta = p.theta0 * (1 + 1e-3 * torch.linspace(-1, 1, p.num_variables, dtype=torch.float64))
+    lens, _ = p.lens(theta)
+    plan = p.ramp_plan(theta, lens, p.bundle(lens))
+    assert bool(plan.given) == ramps and (len(plan.ramps) == 2) == ramps
+    ref, r_ref = p.jacobian_jacfwd(theta)
+    J, r = p.jacobian(theta)
+    assert torch.equal(r, r_ref)
+    _assert_equal_by_group(p, J, ref)
+    assert J.T.is_contiguous()
+    for name in ("tra", "distortion", "relative_illumination"):
+        assert float(ref[p.slices[name]].abs().max()) > 0, name
+
+
+@pytest.mark.parametrize("max_deg", [20.0, 89.0])
+def test_a_problem_of_ramp_terms_alone(make_cooke, max_deg: float) -> None:  # noqa: ANN001
+    # No TRA, no failure term: every row is a ray-angle row. With none active (89°) stage C has no row
+    # at all; J is still (M, N), all 0, as jacfwd's.
+    data = make_cooke(tra={"weight": 0.0}, constraints={"ray_failure": {"weight": 0.0},
+                                                         "ray_angle": {"max_deg": max_deg}})
+    for s in (0, 2, 4):
+        data["surfaces"][s]["vary"] = ["radius"]
+    p = build_problem(parse_spec(data))
+    assert list(p.slices) == ["ray_angle"]
+    ref, r_ref = p.jacobian_jacfwd(p.theta0)
+    J, r = p.jacobian(p.theta0)
+    assert J.shape == ref.shape == (p.size, 3) and torch.equal(r, r_ref)
+    _assert_equal_by_group(p, J, ref)
+    assert (float(ref.abs().max()) > 0) == (max_deg < 45)

@@ -54,3 +54,29 @@ def _centroids(p: Problem) -> torch.Tensor:
     lens, _ = p.lens(p.theta0)
     spot = head(p.bundle(lens), p.num_spot)
     return spot_stats(spot, p.system.wavelength_weights, p.field_weights).centroid[:, 1]
+
+
+@pytest.mark.parametrize("sampling", ["rings:3", "grid:6"])
+def test_the_context_computes_the_centroids_alone_with_the_statistics_numbers(cooke_opt, sampling: str) -> None:  # noqa: ANN001
+    # TRA and distortion read only the fields' centroids: ``TermContext.centroid`` computes those alone
+    # (not the RMS radii: under the Jacobian's stage C every operation carries N tangents), the same
+    # numbers as the full statistics (``stats``, still there for a term that reads it), in value and in
+    # derivative (pupil weights: tests/analysis/test_spot_weights.py).
+    from lensopt.analysis.spot import spot_stats
+
+    cooke_opt["optimize"]["sampling"] = sampling
+    cooke_opt["surfaces"][0]["vary"] = ["radius"]
+    p = build_problem(parse_spec(cooke_opt))
+
+    def centroids(t: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        lens, _ = p.lens(t)
+        ctx = p._context(t, lens, p.bundle(lens))
+        alone = ctx.centroid
+        assert "stats" not in ctx.__dict__  # the radii were not computed
+        return alone, ctx.stats.centroid
+
+    (alone, full), (d_alone, d_full) = torch.func.jvp(centroids, (p.theta0,), (torch.ones_like(p.theta0),))
+    assert torch.equal(alone, full) and torch.equal(d_alone, d_full) and float(d_alone.abs().max()) > 0
+    lens, _ = p.lens(p.theta0)
+    spot = p._context(p.theta0, lens, p.bundle(lens)).spot
+    assert torch.equal(full, spot_stats(spot, p.system.wavelength_weights, p.field_weights).centroid)
