@@ -14,7 +14,7 @@ measures this checkout only. ``--child`` is the child process's entry (prints on
 - *residual*: ``Problem.evaluate`` at a θ not evaluated before (θ0 scaled by 1 + k·1e-12).
 - *Jacobian*: ``Problem.jacobian`` at a θ just evaluated (as LM computes it after a trial).
 - *accepted step*: LM from θ0 (the spec's settings, weights at the start of the schedule) for
-  ``--steps`` steps; CPU time of the run divided by the accepted steps.
+  ``--steps`` steps; CPU time of the run divided by the accepted steps (median of ``--repeats`` runs).
 """
 
 from __future__ import annotations
@@ -78,12 +78,15 @@ def measure(spec: str, repeats: int, steps: int) -> dict:
         theta = theta0 * (1 + (k + 1) * 1e-12)
         evals.append(timed(lambda t=theta: problem.evaluate(t)))
         jacs.append(timed(lambda t=theta: problem.jacobian(t)))
-    opt = make_optimizer(problem, theta0, "lm")
     scale = problem.row_scale(0.0)
-    c, w = _cpu(), time.perf_counter()
-    for _ in range(steps):
-        opt.step(scale)
-    step_cpu, step_wall = _cpu() - c, time.perf_counter() - w
+    runs = []
+    for _ in range(repeats):  # one LM run is a single sample of a noisy clock: the median of ``repeats`` runs
+        opt = make_optimizer(problem, theta0, "lm")
+        c, w = _cpu(), time.perf_counter()
+        for _ in range(steps):
+            opt.step(scale)
+        runs.append((_cpu() - c, time.perf_counter() - w))
+    step_cpu, step_wall = statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs)
     acc = max(opt.accepted, 1)
     return {
         "spec": spec, "package": str(Path(lensopt.__file__).parent), "N": problem.num_variables, "M": problem.size,
