@@ -1,4 +1,4 @@
-"""Table S8 on the best lens of each point of a TR sweep of the 5P telephoto (issue 15, session 23).
+"""Table S8 on the best lens of each point of a TR sweep of the 5P telephoto (issue 15, session 23; issue 25).
 
     lensopt sweep specs/telephoto_5p_tr080.toml --vary 'optimize.solves[0].value=19.425,20.72,22.015,23.31' \
         --starts 3 --steps 400 --scheduler local --workers 2 -o out/tr_sweep
@@ -6,17 +6,27 @@
         lensopt optimize out/tr_sweep/best_$i.json -o out/tr_cont_$i.json --steps 600 --seed 0 --full-weight
     done
     PYTHONPATH=. python benchmarks/studies/tr_sweep_report.py out/tr_sweep benchmarks/studies/results_tr_sweep.json \
-        'out/tr_cont_{i}.json'
+        --continued 'out/tr_cont_{i}.json'
 
-For each point: TR = TTL / 25.9 mm, the best start's ESR (rings:24), every start's ESR and stop reason, and
-Table S8 checked on the dense sample (``studies_report.lens_checks``, the TTL of that point). Also says
-whether the best ESR falls monotonically with TR, the form of seed Figure S13.
+The seed's procedure (S4.2.1) at 5000 steps, reported under a key of the same file and compared with the curve above
+(its points after the full-weight continuation); the TR 0.80 point is the shipped lens, made by the same command
+(``lensopt optimize specs/telephoto_5p_tr080.toml --steps 5000 --seed 0``, the sweep's start 0 of that point):
+
+    lensopt sweep specs/telephoto_5p_tr080.toml --vary 'optimize.solves[0].value=19.425,22.015,23.31' \
+        --starts 1 --steps 5000 --scheduler local --workers 2 -o out/tr_sweep5k
+    PYTHONPATH=. python benchmarks/studies/tr_sweep_report.py out/tr_sweep5k benchmarks/studies/results_tr_sweep.json \
+        --key procedure_5000 --point 20.72=lenses/telephoto_5p_tr080.json
+
+For each point: TR = TTL / 25.9 mm, the best start's ESR (rings:24) and the seed's measure (11 fields), every
+start's ESR and stop reason, and Table S8 checked on the dense sample and by the seed's definition
+(``studies_report.lens_checks``, the TTL of that point). Also says whether the best ESR falls monotonically with TR,
+the form of seed Figure S13, and with --key whether every point is below the file's earlier curve.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
-import sys
 from pathlib import Path
 
 from benchmarks.studies.studies_report import lens_checks
@@ -29,38 +39,77 @@ def _falls(values: list[float]) -> bool:
     return all(b < a for a, b in zip(values, values[1:], strict=False))
 
 
-def main(folder: str, out: str, continued: str | None = None) -> None:
+def _checked(path: Path) -> dict:
+    checks = lens_checks("telephoto_5p_tr080", load_spec(path))
+    return {"esr_um_rings24_dense_check": checks["esr_um_rings24"], "seed_esr_um": checks["seed_esr_um"],
+            "requirements_failed": checks["requirements_failed"], "requirements": checks["requirements"],
+            "requirements_failed_seed_definition": checks["requirements_seed_definition"]["failed"],
+            "glasses": checks["glasses"]}
+
+
+def _rows(folder: str, points: dict[float, str]) -> list[dict]:
     sweep = json.loads((Path(folder) / "sweep.json").read_text())
     rows = []
     for i, row in enumerate(sweep["points"]):
         ttl = float(row["optimize.solves[0].value"])
-        checks = lens_checks("telephoto_5p_tr080", load_spec(Path(folder) / f"best_{i}.json"))
         starts = sorted((r for r in sweep["starts"] if r["point"] == i), key=lambda r: r["start"])
-        rows.append({"tr": ttl / EFL_MM, "ttl_mm": ttl, "best_start": row["best_start"],
-                     "best_esr_um": row["best_esr_um"], "esr_um_rings24_dense_check": checks["esr_um_rings24"],
-                     "starts": [{"start": r["start"], "esr_um": r.get("esr_um"), "stop_reason": r.get("stop_reason"),
+        rows.append({"tr": ttl / EFL_MM, "ttl_mm": ttl, "lens": str(Path(folder) / f"best_{i}.json"),
+                     "best_start": row["best_start"], "best_esr_um": row["best_esr_um"],
+                     "starts": [{"start": r["start"], "esr_um": r.get("esr_um"), "seed_esr_um": r.get("seed_esr_um"),
+                                 "steps": r.get("steps"), "stop_reason": r.get("stop_reason"),
                                  "bound": r.get("bound"), "wall_s": r.get("wall_s")} for r in starts],
-                     "requirements_failed": checks["requirements_failed"], "requirements": checks["requirements"],
-                     "glasses": checks["glasses"]})
-        print(f"TR {ttl / EFL_MM:.3f} (TTL {ttl} mm): best ESR {row['best_esr_um']:.3f} µm "
-              f"(start {row['best_start']}), "
-              f"starts {[round(s['esr_um'], 3) for s in rows[-1]['starts']]}, Table S8 failed: "
-              f"{checks['requirements_failed']}")
-        if continued:  # the best lens continued at full weight: e.g. out/tr_cont_{i}.json
-            more = lens_checks("telephoto_5p_tr080", load_spec(continued.format(i=i)))
-            rows[-1]["continued"] = {"lens": continued.format(i=i), "esr_um": more["esr_um_rings24"],
-                                     "requirements_failed": more["requirements_failed"],
-                                     "requirements": more["requirements"], "glasses": more["glasses"]}
-            print(f"    continued ({continued.format(i=i)}): ESR {more['esr_um_rings24']:.3f} µm, Table S8 failed: "
-                  f"{more['requirements_failed']}")
-    esr = [r["best_esr_um"] for r in rows]
-    monotone = _falls(esr)
-    print(f"best ESR falls monotonically with TR: {monotone}")
-    if continued:
-        print(f"continued ESR falls monotonically with TR: {_falls([r['continued']['esr_um'] for r in rows])}")
-    Path(out).write_text(json.dumps({"folder": folder, "settings": sweep.get("settings"), "rows": rows,
-                                     "monotone_decreasing": monotone}, indent=1, ensure_ascii=False) + "\n")
+                     **_checked(Path(folder) / f"best_{i}.json")})
+    for ttl, lens in points.items():  # points run outside the sweep by the same procedure
+        checked = _checked(Path(lens))
+        rows.append({"tr": ttl / EFL_MM, "ttl_mm": ttl, "lens": lens, "best_start": 0,
+                     "best_esr_um": checked["esr_um_rings24_dense_check"], "starts": [], **checked})
+    return sorted(rows, key=lambda r: r["ttl_mm"])
+
+
+def _show(row: dict) -> None:
+    print(f"TR {row['tr']:.3f} (TTL {row['ttl_mm']} mm, {row['lens']}): "
+          f"ESR {row['esr_um_rings24_dense_check']:.3f} µm, "
+          f"seed's measure {row['seed_esr_um']:.3f} µm, Table S8 failed: {row['requirements_failed']} "
+          f"(seed's definition: {row['requirements_failed_seed_definition']})")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("folder")
+    ap.add_argument("out")
+    ap.add_argument("--continued", help="the best lens of point i continued at full weight, e.g. out/tr_cont_{i}.json")
+    ap.add_argument("--key", help="write under this key of OUT (kept with the file's earlier curve) and compare")
+    ap.add_argument("--point", action="append", default=[], help="TTL=LENS: a point run outside the sweep")
+    args = ap.parse_args()
+    points = {float(p.split("=", 1)[0]): p.split("=", 1)[1] for p in args.point}
+    rows = _rows(args.folder, points)
+    for row in rows:
+        _show(row)
+        if args.continued:
+            lens = args.continued.format(i=rows.index(row))
+            row["continued"] = {"lens": lens, **_checked(Path(lens))}
+            print(f"    continued ({lens}): ESR {row['continued']['esr_um_rings24_dense_check']:.3f} µm")
+    esr = [r["esr_um_rings24_dense_check"] for r in rows]
+    result = {"folder": args.folder, "rows": rows, "monotone_decreasing": _falls(esr),
+              "monotone_decreasing_seed_measure": _falls([r["seed_esr_um"] for r in rows])}
+    print(f"ESR falls monotonically with TR: {result['monotone_decreasing']} "
+          f"(seed's measure: {result['monotone_decreasing_seed_measure']})")
+    out = Path(args.out)
+    if not args.key:
+        out.write_text(json.dumps(result, indent=1, ensure_ascii=False) + "\n")
+        return
+    data = json.loads(out.read_text())
+    before = {round(r["ttl_mm"], 3): r.get("continued", {}).get("esr_um", r["best_esr_um"]) for r in data["rows"]}
+    for row in rows:
+        row["before_esr_um"] = before.get(round(row["ttl_mm"], 3))
+    result["below_earlier_curve"] = all(
+        r["before_esr_um"] is None or r["esr_um_rings24_dense_check"] < r["before_esr_um"] for r in rows)
+    print("below the earlier curve at every point:", result["below_earlier_curve"],
+          [(round(r["tr"], 2), r["before_esr_um"] and round(r["before_esr_um"], 3),
+            round(r["esr_um_rings24_dense_check"], 3)) for r in rows])
+    data[args.key] = result
+    out.write_text(json.dumps(data, indent=1, ensure_ascii=False) + "\n")
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:4])
+    main()
