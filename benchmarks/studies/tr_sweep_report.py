@@ -53,7 +53,7 @@ def _rows(folder: str, points: dict[float, str]) -> list[dict]:
     for i, row in enumerate(sweep["points"]):
         ttl = float(row["optimize.solves[0].value"])
         starts = sorted((r for r in sweep["starts"] if r["point"] == i), key=lambda r: r["start"])
-        rows.append({"tr": ttl / EFL_MM, "ttl_mm": ttl, "lens": str(Path(folder) / f"best_{i}.json"),
+        rows.append({"tr": ttl / EFL_MM, "ttl_mm": ttl, "point": i, "lens": str(Path(folder) / f"best_{i}.json"),
                      "best_start": row["best_start"], "best_esr_um": row["best_esr_um"],
                      "starts": [{"start": r["start"], "esr_um": r.get("esr_um"), "seed_esr_um": r.get("seed_esr_um"),
                                  "steps": r.get("steps"), "stop_reason": r.get("stop_reason"),
@@ -85,8 +85,8 @@ def main() -> None:
     rows = _rows(args.folder, points)
     for row in rows:
         _show(row)
-        if args.continued:
-            lens = args.continued.format(i=rows.index(row))
+        if args.continued and "point" in row:  # sweep point index (rows sorted by TTL; --point rows: none)
+            lens = args.continued.format(i=row["point"])
             row["continued"] = {"lens": lens, **_checked(Path(lens))}
             print(f"    continued ({lens}): ESR {row['continued']['esr_um_rings24_dense_check']:.3f} µm")
     esr = [r["esr_um_rings24_dense_check"] for r in rows]
@@ -99,7 +99,11 @@ def main() -> None:
         out.write_text(json.dumps(result, indent=1, ensure_ascii=False) + "\n")
         return
     data = json.loads(out.read_text())
-    before = {round(r["ttl_mm"], 3): r.get("continued", {}).get("esr_um", r["best_esr_um"]) for r in data["rows"]}
+    def curve(r: dict) -> float:  # a point of the earlier curve: its continued lens when there is one
+        c = r.get("continued") or {}
+        return c.get("esr_um", c.get("esr_um_rings24_dense_check", r["best_esr_um"]))
+
+    before = {round(r["ttl_mm"], 3): curve(r) for r in data["rows"]}
     for row in rows:
         row["before_esr_um"] = before.get(round(row["ttl_mm"], 3))
     result["below_earlier_curve"] = all(
