@@ -179,6 +179,9 @@ def sweep(
     workers: WorkersOpt = 2,
     restart: Annotated[bool, typer.Option("--restart", help="Start over in a folder that holds another "
                                           "sweep (its files are removed).")] = False,
+    continuation: Annotated[bool, typer.Option("--continuation", help="Walk along one --vary key: the points "
+                                               "in the order given, each starting from the previous point's best "
+                                               "lens with its value set.")] = False,
     esr_sampling: Annotated[str, typer.Option("--esr-sampling", help="Pupil sampling of the reported ESR.")]
     = "gauss:16",
     seed: SeedOpt = 0,
@@ -186,7 +189,8 @@ def sweep(
     as_json: JsonOpt = False,
 ) -> None:
     """Optimize SPEC at every point of a grid of values (--vary), with --starts perturbed starts each;
-    keep the best start per point; write sweep.json, sweep.csv, best_<i>.json and sweep.png."""
+    keep the best start per point; write sweep.json, sweep.csv, best_<i>.json and sweep.png. With
+    --continuation each point starts from the previous point's best lens (a walk that carries a basin)."""
     from lensopt.optics.sampling import PupilSampling
     from lensopt.spec import load_spec
     from lensopt.study.keys import parse_vary
@@ -201,8 +205,12 @@ def sweep(
         raise LensoptError(f"cannot read the file: {err.strerror}", path=str(spec)) from None
     PupilSampling.parse(esr_sampling, seed=seed, path="--esr-sampling", weighted=True)
     varies = [parse_vary(v) for v in vary]
+    if continuation and len(varies) != 1:
+        raise LensoptError("a continuation walks along one key: give one --vary", path="--continuation",
+                           got=[v.key for v in varies])
     points = expand_grid(base, varies)
-    settings = Settings(starts=starts, sigma=perturb, steps=steps, seed=seed, esr_sampling=esr_sampling)
+    settings = Settings(starts=starts, sigma=perturb, steps=steps, seed=seed, esr_sampling=esr_sampling,
+                        continuation=continuation)
     with SweepProgress(err_console, points, starts, enabled=not quiet) as progress:
         result = run_sweep(base, text, varies, settings, output, scheduler=sched, workers=workers,
                            restart=restart, spec_name=base.name or spec.name, callback=progress, points=points,

@@ -17,6 +17,10 @@ N starts per grid point, the best start kept per point. Library code: no printin
   the numbers; a run with other arguments is refused unless ``restart``.
 - Best per point: the lowest final merit (½‖ℓ‖² of a fresh ``Problem`` of the optimized lens with the
   final weights) among the finished starts whose final lens is physical; ties go to the lower start.
+- Continuation (``Settings.continuation``, one key): the points run in the order given, and point i ≥ 1
+  starts from point i−1's best lens (on disk) with point i's value set, instead of from the input spec:
+  a walk that carries a basin along the swept value (a total track stepped down from where the basin
+  is good to where it is wanted). A point whose predecessor has no finished start fails, naming it.
 """
 
 from __future__ import annotations
@@ -64,6 +68,7 @@ class Settings:
         esr_sampling: pupil sampling of the reported ESR (``lensopt optimize`` reports gauss:16).
         full_weight: no weight schedules, every constraint group at its final weight from the first step
             (``lensopt optimize --full-weight``): how a basin hop continues a lens whose glasses are bound.
+        continuation: each point starts from the previous point's best lens (module doc).
     """
 
     starts: int = 1
@@ -73,6 +78,7 @@ class Settings:
     seed: int = 0
     esr_sampling: str = "gauss:16"
     full_weight: bool = False
+    continuation: bool = False
 
 
 @dataclass(frozen=True)
@@ -260,7 +266,10 @@ def _report_esr(spec: LensSpec, settings: Settings, *,
 
 def manifest(spec_text: str, varies: Sequence[Vary], settings: Settings) -> dict[str, Any]:
     """What identifies a sweep: the spec text, the grid and the settings, and their SHA-256."""
-    args = {"vary": [[v.key, list(v.values)] for v in varies], "settings": asdict(settings)}
+    fields = asdict(settings)
+    if not settings.continuation:  # the manifests of sweeps written before the option keep their hash
+        del fields["continuation"]
+    args = {"vary": [[v.key, list(v.values)] for v in varies], "settings": fields}
     digest = hashlib.sha256((spec_text + "\0" + json.dumps(args, sort_keys=True)).encode()).hexdigest()
     return {"version": MANIFEST_VERSION, "hash": digest, **args}
 
@@ -399,6 +408,29 @@ def _is_num(v: Any) -> bool:
 # ------------------------------------------------------------------------------------------- run
 
 
+def _continued_spec(outdir: Path, point: Point, points: Sequence[Point], records: dict[tuple[int, int], dict[str, Any]],
+                    starts: int) -> tuple[str | None, str]:
+    """(the start spec of ``point`` in a continuation as JSON text, "") — point 0: its own spec; point i:
+    point i−1's best lens with point i's value set — or (None, why) when there is nothing to continue from."""
+    if point.index == 0:
+        return point.spec_json, ""
+    prev = points[point.index - 1]
+    best = best_of([records[(prev.index, k)] for k in range(starts) if (prev.index, k) in records])
+    if best is None:
+        return None, f"the continuation stopped: point {prev.index} has no finished start"
+    from lensopt.spec.build import build
+
+    lens = parse_spec(json.loads((outdir / "points" / f"{prev.index}_{best['start']}.lens.json").read_text()))
+    (key, value), = point.values.items()
+    shown = f"{key}={format_value(value)}"
+    try:
+        lens = set_key(lens, key, value)
+        build(lens)
+    except LensoptError as err:
+        return None, f"point {prev.index}'s lens with {shown} is unusable: {err}"
+    return dump_json(lens), ""
+
+
 def run_sweep(spec: LensSpec, spec_text: str, varies: Sequence[Vary], settings: Settings, outdir: Path, *,
               scheduler: str | None = None, workers: int = 2, restart: bool = False, spec_name: str = "",
               callback: Callable[[SweepEvent], None] | None = None, plot: bool = True,
@@ -422,38 +454,62 @@ def run_sweep(spec: LensSpec, spec_text: str, varies: Sequence[Vary], settings: 
         raise LensoptError("must be a finite number ≥ 0", path="--perturb", got=settings.sigma)
     if not any(s.vary for s in spec.surfaces):
         raise LensoptError("nothing to optimize: no surface has a vary list", path="surfaces")
+    if settings.continuation and len(varies) != 1:
+        raise LensoptError("a continuation walks along one key: give one --vary", path="--continuation",
+                           got=[v.key for v in varies])
     points = points if points is not None else expand_grid(spec, varies)
     prepare_outdir(outdir, manifest(spec_text, varies, settings), restart=restart)
-    tasks = [Task(p.index, k, p.spec_json) for p in points for k in range(settings.starts)]
     records: dict[tuple[int, int], dict[str, Any]] = {}
-    todo = []
-    for t in tasks:
-        rec = load_record(outdir, t)
-        if rec is None:
-            todo.append(t)
-        else:
-            records[(t.point, t.start)] = rec
-            if callback is not None:
-                callback(SweepEvent("skipped", t.point, t.start, rec))
-    result = SweepResult(points, settings, records, [], False, skipped=len(tasks) - len(todo),
-                         keys=[v.key for v in varies])
+    n_tasks = len(points) * settings.starts
+    result = SweepResult(points, settings, records, [], False, keys=[v.key for v in varies])
+    plans: list[str] = []
 
-    def done(i: int, out: tuple[dict[str, Any], str | None]) -> None:
-        t = todo[i]
-        record, lens_json = out
-        save_record(outdir, t, record, lens_json)
-        records[(t.point, t.start)] = record
-        result.computed += 1
-        if callback is not None:
-            callback(SweepEvent("done", t.point, t.start, record))
+    def plan(why: str) -> None:  # said once (a continuation runs its points one after another)
+        if on_plan is not None and why not in plans:
+            on_plan(why)
+        plans.append(why)
+
+    def run(tasks: list[Task]) -> None:
+        todo = []
+        for t in tasks:
+            rec = load_record(outdir, t)
+            if rec is None:
+                todo.append(t)
+            else:
+                records[(t.point, t.start)] = rec
+                result.skipped += 1
+                if callback is not None:
+                    callback(SweepEvent("skipped", t.point, t.start, rec))
+
+        def done(i: int, out: tuple[dict[str, Any], str | None]) -> None:
+            t = todo[i]
+            record, lens_json = out
+            save_record(outdir, t, record, lens_json)
+            records[(t.point, t.start)] = record
+            result.computed += 1
+            if callback is not None:
+                callback(SweepEvent("done", t.point, t.start, record))
+
+        run_tasks(functools.partial(run_task, engine=engine), todo, shared=settings, scheduler=scheduler,
+                  workers=workers, on_done=done, on_plan=plan)
 
     try:
-        run_tasks(functools.partial(run_task, engine=engine), todo, shared=settings, scheduler=scheduler,
-                  workers=workers, on_done=done, on_plan=on_plan)
+        if settings.continuation:
+            for p in points:
+                start_json, why = _continued_spec(outdir, p, points, records, settings.starts)
+                tasks = [Task(p.index, k, start_json or p.spec_json) for k in range(settings.starts)]
+                if why:  # nothing to continue from: the point's starts fail, naming why
+                    for t in tasks:
+                        if load_record(outdir, t) is None:
+                            save_record(outdir, t, {"point": t.point, "start": t.start, "status": "failed",
+                                                    "reason": why, "wall_s": 0.0}, None)
+                run(tasks)
+        else:
+            run([Task(p.index, k, p.spec_json) for p in points for k in range(settings.starts)])
     except KeyboardInterrupt:
         result.interrupted = True
     result.rows = table(points, records, settings.starts)
-    result.complete = len(records) == len(tasks)
+    result.complete = len(records) == n_tasks
     result.elapsed_s = time.perf_counter() - t0
     write_outputs(outdir, result, spec_name=spec_name, plot=plot and not result.interrupted)
     return result

@@ -74,6 +74,11 @@ def test_bad_key_is_one_line_exit_2(tmp_path: Path) -> None:
     r = runner.invoke(app, ["sweep", str(spec), "--vary", "optimize.steps=3", "-o", str(tmp_path / "o"),
                             "--scheduler", "nowhere"])
     assert r.exit_code == 2 and r.stderr.startswith("error: --scheduler:")
+    r = runner.invoke(app, ["sweep", str(spec), "--vary", "optimize.steps=3,4", "--vary", "optimize.solves[0].value=50",
+                            "--continuation", "-o", str(tmp_path / "o")])
+    assert r.exit_code == 2 and r.stderr.strip() == ("error: --continuation: a continuation walks along one key: give "
+                                                     "one --vary (got ['optimize.steps', 'optimize.solves[0].value'])")
+    assert not (tmp_path / "o").exists()
 
 
 def test_sigterm_keeps_finished_starts_and_the_run_resumes(tmp_path: Path) -> None:

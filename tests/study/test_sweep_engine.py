@@ -218,3 +218,66 @@ def test_perturbation_to_a_negative_glass_thickness_is_a_lensopt_error() -> None
         except LensoptError as err:
             outcomes.append(str(err))
     assert any("glass element thickness" in o for o in outcomes), outcomes
+
+
+def test_continuation_starts_each_point_from_the_previous_best_lens(tmp_path: Path,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    spec_path, text = _spec(tmp_path)
+    st = Settings(starts=1, steps=3, seed=0, esr_sampling="rings:3", continuation=True)
+    vary = parse_vary("optimize.solves[0].value=52.0,48.0,46.0")
+    seen: list[dict] = []
+    real = sw.optimize
+
+    def capturing(spec, **kw):  # noqa: ANN001, ANN202
+        seen.append(json.loads(dump_json(spec)))
+        return real(spec, **kw)
+
+    monkeypatch.setattr(sw, "optimize", capturing)
+    out = tmp_path / "walk"
+    res = run_sweep(load_spec(spec_path), text, [vary], st, out, plot=False)
+    assert res.complete and res.computed == 3 and len(seen) == 3
+    base = json.loads(dump_json(load_spec(spec_path)))
+    # Point 0 starts from the spec (value set), points 1 and 2 from the lens the point before wrote, its value set.
+    assert seen[0]["surfaces"] == base["surfaces"] and seen[0]["optimize"]["solves"][0]["value"] == 52.0
+    for i, value in ((1, 48.0), (2, 46.0)):
+        before = json.loads((out / "points" / f"{i - 1}_0.lens.json").read_text())
+        assert seen[i]["surfaces"] == before["surfaces"] != base["surfaces"]
+        assert seen[i]["optimize"]["solves"][0]["value"] == value
+        assert before["optimize"]["solves"][0]["value"] == [52.0, 48.0][i - 1]
+    # The manifest says it is a continuation (a plain sweep of the same grid is refused in this folder), and a
+    # run stopped after point 0 resumes there: point 1 from point 0's lens on disk, to the same numbers.
+    with pytest.raises(LensoptError, match="^--output: holds a sweep"):
+        run_sweep(load_spec(spec_path), text, [vary], Settings(starts=1, steps=3, seed=0, esr_sampling="rings:3"),
+                  out, plot=False)
+    copy = tmp_path / "copy"
+    (copy / "points").mkdir(parents=True)
+    (copy / "manifest.json").write_bytes((out / "manifest.json").read_bytes())
+    for f in (out / "points").glob("0_0.*"):
+        (copy / "points" / f.name).write_bytes(f.read_bytes())
+    seen.clear()
+    resumed = run_sweep(load_spec(spec_path), text, [vary], st, copy, plot=False)
+    assert resumed.computed == 2 and resumed.skipped == 1 and len(seen) == 2
+    for i in (1, 2):
+        assert _numbers(resumed.records[(i, 0)]) == _numbers(res.records[(i, 0)])
+        assert (copy / "points" / f"{i}_0.lens.json").read_bytes() == (out / "points" / f"{i}_0.lens.json").read_bytes()
+
+
+def test_continuation_stops_where_a_point_has_no_finished_start(tmp_path: Path,
+                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    spec_path, text = _spec(tmp_path)
+    st = Settings(starts=1, steps=2, seed=0, esr_sampling="rings:3", continuation=True)
+
+    def failing(spec, **kw):  # noqa: ANN001, ANN202
+        raise LensoptError("no rays reach the image")
+
+    monkeypatch.setattr(sw, "optimize", failing)
+    res = run_sweep(load_spec(spec_path), text, [parse_vary("optimize.solves[0].value=50.0,48.0")], st,
+                    tmp_path / "o", plot=False)
+    assert res.records[(0, 0)]["reason"] == "no rays reach the image"
+    assert res.records[(1, 0)] == {"point": 1, "start": 0, "status": "failed", "wall_s": 0.0,
+                                   "reason": "the continuation stopped: point 0 has no finished start"}
+    assert res.complete and [r["best_start"] for r in res.rows] == [None, None]
+    with pytest.raises(LensoptError, match="^--continuation: a continuation walks along one key"):
+        run_sweep(load_spec(spec_path), text, [parse_vary("optimize.solves[0].value=50.0"),
+                                               parse_vary("optimize.steps=2,3")], st, tmp_path / "o2", plot=False)
+    assert not (tmp_path / "o2").exists()
