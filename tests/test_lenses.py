@@ -17,12 +17,16 @@ were made for, so that a change to the tracer or the optimizer that would break 
   to the 2 % distortion limit); S6.1 and its network in ``tests/restore/test_shipped_networks.py``.
 - ``telephoto_5p_tr080.json`` and ``telephoto_5p1_middle_tr075.json``: the seed's telephoto study (S4) and
   its hybrid 5P+1 (middle) (S4.2.2), each from its crude start by the seed's procedure (S4.2.1: free plastics,
-  then bound) at half the seed's 10,000 steps: ``lensopt optimize specs/telephoto_5p_tr080.toml --steps 5000``
-  (converged at step 3763) and ``lensopt optimize specs/telephoto_5p1_middle_tr075.toml --steps 5000``
-  (converged at 3751), then 1000 steps ``--full-weight`` and 400 with the ray-angle group at weight 100 and
-  59.8° (the lens's own ``[optimize]``) (benchmarks/README.md, studies): every Table S8 requirement met on a
-  dense ray sample, Table S10 plastics; their ESRs (3.06 and 4.80 µm) are above the seed's (≈ 1.75 and ≈ 2.6
-  µm). The hybrid has its phase on its own plane between E4 and E5, as its spec and the seed's design.
+  then bound) at half the seed's 10,000 steps. The 5P: the TR sweep's TR 0.85 point (``lensopt sweep
+  specs/telephoto_5p_tr080.toml --vary 'optimize.solves[0].value=…,22.015,…' --steps 5000``), its fields set
+  to the seed's 11, walked to TR 0.80 (``lensopt sweep … --continuation --steps 300`` over TTL 21.6913,
+  21.3675, 21.0438, 20.72), its fields set back to the spec's 5 (benchmarks/README.md, studies; the direct
+  5000-step run from the crude start gives 3.06 µm). The hybrid: ``lensopt optimize
+  specs/telephoto_5p1_middle_tr075.toml --steps 5000`` (converged at 3751), then 1000 steps ``--full-weight`` and
+  400 with the ray-angle group at weight 100 and 59.8° (the lens's own ``[optimize]``): every Table S8
+  requirement met on a dense ray sample, Table S10 plastics; their ESRs (2.90 and 4.80 µm) are above the
+  seed's (≈ 1.75 and ≈ 2.6 µm). The hybrid has its phase on its own plane between E4 and E5, as its spec and
+  the seed's design.
 - ``microscope_8p_wd12.json``: the seed's microscope objective study (S5) after a 2400-step run (1200 with
   free glasses, 1200 bound) from the crude start of ``specs/microscope_8p_wd12_alt.toml`` (alternating
   positive and negative elements; the first start, ``specs/microscope_8p_wd12.toml``, reached 6.63 µm),
@@ -148,7 +152,7 @@ def test_the_raw_cmount_lens_images_better_than_the_spot_lens(cmount) -> None:
     _cmount_requirements(model, rep)
 
 
-@pytest.mark.parametrize(("name", "ttl", "esr_um"), [("telephoto_5p_tr080", 20.72, 3.058),
+@pytest.mark.parametrize(("name", "ttl", "esr_um"), [("telephoto_5p_tr080", 20.72, 2.903),
                                                      ("telephoto_5p1_middle_tr075", 19.425, 4.797)])
 def test_the_telephoto_study_lenses_meet_table_s8(name: str, ttl: float, esr_um: float) -> None:
     # Table S8 with Table S11's thresholds, measured on a dense ray sample (a 31² pupil grid and 64 rim

@@ -9,13 +9,17 @@
         --continued 'out/tr_cont_{i}.json'
 
 The seed's procedure (S4.2.1) at 5000 steps, reported under a key of the same file and compared with the curve above
-(its points after the full-weight continuation); the TR 0.80 point is the shipped lens, made by the same command
-(``lensopt optimize specs/telephoto_5p_tr080.toml --steps 5000 --seed 0``, the sweep's start 0 of that point):
+(its points after the full-weight continuation); the TR 0.80 point is made by the same command (the sweep's start 0 of
+that point; it was the shipped lens until the continuation below replaced it):
 
     lensopt sweep specs/telephoto_5p_tr080.toml --vary 'optimize.solves[0].value=19.425,22.015,23.31' \
         --starts 1 --steps 5000 --scheduler local --workers 2 -o out/tr_sweep5k
+    lensopt optimize specs/telephoto_5p_tr080.toml --steps 5000 --seed 0 -o out/tele_5000.json
     PYTHONPATH=. python benchmarks/studies/tr_sweep_report.py out/tr_sweep5k benchmarks/studies/results_tr_sweep.json \
-        --key procedure_5000 --point 20.72=lenses/telephoto_5p_tr080.json
+        --key procedure_5000 --point 20.72=out/tele_5000.json
+
+A continuation (``lensopt sweep … --continuation``) is reported the same way: its points are the walk's stages, and
+``--point`` adds the lens it started from (benchmarks/README.md, studies: key ``continuation_085_f11``).
 
 For each point: TR = TTL / 25.9 mm, the best start's ESR (rings:24) and the seed's measure (11 fields), every
 start's ESR and stop reason, and Table S8 checked on the dense sample and by the seed's definition
