@@ -164,7 +164,8 @@ def render_table(console: Console, result: SweepResult, outdir: Path) -> None:
 def sweep(
     spec: Annotated[Path, typer.Argument(help="Lens spec (.toml or .json) with vary lists and an optimize "
                                          "section.")],
-    vary: Annotated[list[str], typer.Option("--vary", help="KEY=V1,V2,... or KEY=START:STOP:STEP (inclusive); "
+    vary: Annotated[list[str], typer.Option("--vary", help="KEY=V1,V2,... or KEY=START:STOP:STEP (inclusive; a "
+                                            "negative STEP descends); "
                                             "KEY a dotted path such as optimize.solves[0].value or "
                                             "surfaces[3].thickness. Several: the full grid.")],
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the sweep (resumed when it holds "

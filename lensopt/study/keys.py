@@ -131,8 +131,9 @@ def _range(text: str, option: str) -> tuple[float, ...]:
     except ValueError:
         raise LensoptError("a range is START:STOP:STEP with numbers, e.g. 0.75:0.90:0.05", path=option,
                            got=text) from None
-    if not all(math.isfinite(x) for x in (a, b, step)) or step <= 0 or b < a:
-        raise LensoptError("a range needs START ≤ STOP and STEP > 0", path=option, got=text)
+    if not all(math.isfinite(x) for x in (a, b, step)) or step == 0 or (b - a) * step < 0:
+        raise LensoptError("a range needs START ≤ STOP and STEP > 0, or START ≥ STOP and STEP < 0 (a descending "
+                           "walk)", path=option, got=text)
     n = math.floor((b - a) / step + 1e-9)
     if n >= 10_000:
         raise LensoptError("a range of more than 10000 values", path=option, got=text)
@@ -149,7 +150,7 @@ def _decimals(x: float) -> int:
 
 
 def parse_vary(text: str, *, option: str = "--vary") -> Vary:
-    """``KEY=V1,V2,…`` or ``KEY=START:STOP:STEP`` (inclusive) → ``Vary``. Values are ints, floats,
+    """``KEY=V1,V2,…`` or ``KEY=START:STOP:STEP`` (inclusive; STEP < 0 descends) → ``Vary``. Values are ints, floats,
     true/false or strings (material names)."""
     key, sep, rest = text.partition("=")
     key = key.strip()

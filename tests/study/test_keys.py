@@ -60,8 +60,10 @@ def test_parse_vary_lists_and_ranges() -> None:
     # inclusive range, without binary noise (0.75 + 3·0.05 would be 0.9000000000000001)
     assert parse_vary("k=0.75:0.90:0.05").values == (0.75, 0.8, 0.85, 0.9)
     assert parse_vary("optimize.steps=10:30:10").values == (10.0, 20.0, 30.0)
+    # a descending range (a continuation's walk): TR 0.85 → 0.80 of the 25.9 mm telephoto in 4 stages
+    assert parse_vary("k=22.015:20.72:-0.32375").values == (22.015, 21.69125, 21.3675, 21.04375, 20.72)
     assert parse_vary("surfaces[0].material=SK16,schott:N-BK7").values == ("SK16", "schott:N-BK7")
     assert parse_vary("optimize.steps=5,7").values == (5, 7)
-    for bad in ("k", "k=", "k=1,,2", "k=1,1", "k=2:1:0.5", "k=0:1:0", "=1,2"):
+    for bad in ("k", "k=", "k=1,,2", "k=1,1", "k=2:1:0.5", "k=1:2:-0.5", "k=0:1:0", "=1,2"):
         with pytest.raises(LensoptError, match="^--vary"):
             parse_vary(bad)
