@@ -183,6 +183,9 @@ def sweep(
     continuation: Annotated[bool, typer.Option("--continuation", help="Walk along one --vary key: the points "
                                                "in the order given, each starting from the previous point's best "
                                                "lens with its value set.")] = False,
+    full_weight: Annotated[bool, typer.Option("--full-weight", help="No weight schedules: every constraint "
+                                              "group at the weight its schedule ends on from the first step "
+                                              "of every start (as optimize --full-weight).")] = False,
     esr_sampling: Annotated[str, typer.Option("--esr-sampling", help="Pupil sampling of the reported ESR.")]
     = "gauss:16",
     seed: SeedOpt = 0,
@@ -211,7 +214,7 @@ def sweep(
                            got=[v.key for v in varies])
     points = expand_grid(base, varies)
     settings = Settings(starts=starts, sigma=perturb, steps=steps, seed=seed, esr_sampling=esr_sampling,
-                        continuation=continuation)
+                        full_weight=full_weight, continuation=continuation)
     with SweepProgress(err_console, points, starts, enabled=not quiet) as progress:
         result = run_sweep(base, text, varies, settings, output, scheduler=sched, workers=workers,
                            restart=restart, spec_name=base.name or spec.name, callback=progress, points=points,

@@ -110,3 +110,21 @@ def test_sigterm_keeps_finished_starts_and_the_run_resumes(tmp_path: Path) -> No
     assert r.exit_code == 0, r.output
     again = json.loads(r.stdout)
     assert again["complete"] and again["skipped"] == done and again["computed"] == 4 - done
+
+
+def test_full_weight_reaches_every_start_and_the_manifest(tmp_path: Path, monkeypatch) -> None:  # noqa: ANN001
+    import lensopt.study.sweep as sw
+
+    seen: list[bool] = []
+    real = sw.optimize
+
+    def capturing(spec, **kw):  # noqa: ANN001, ANN202
+        seen.append(kw["full_weight"])
+        return real(spec, **kw)
+
+    monkeypatch.setattr(sw, "optimize", capturing)
+    spec, out = _tiny(tmp_path), tmp_path / "out"
+    r = runner.invoke(app, _args(spec, out, "--full-weight", "--steps", "1"))
+    assert r.exit_code == 0, r.output
+    assert seen == [True] * 4
+    assert json.loads((out / "manifest.json").read_text())["settings"]["full_weight"] is True
