@@ -198,7 +198,7 @@ def sweep(
     from lensopt.optics.sampling import PupilSampling
     from lensopt.spec import load_spec
     from lensopt.study.keys import parse_vary
-    from lensopt.study.sweep import Settings, expand_grid, run_sweep
+    from lensopt.study.sweep import Settings, check_continuation, expand_grid, run_sweep
 
     sched = check_scheduler(scheduler)
     engine = make_engine(retain_freed_memory=True)
@@ -209,9 +209,8 @@ def sweep(
         raise LensoptError(f"cannot read the file: {err.strerror}", path=str(spec)) from None
     PupilSampling.parse(esr_sampling, seed=seed, path="--esr-sampling", weighted=True)
     varies = [parse_vary(v) for v in vary]
-    if continuation and len(varies) != 1:
-        raise LensoptError("a continuation walks along one key: give one --vary", path="--continuation",
-                           got=[v.key for v in varies])
+    if continuation:
+        check_continuation(varies)
     points = expand_grid(base, varies)
     settings = Settings(starts=starts, sigma=perturb, steps=steps, seed=seed, esr_sampling=esr_sampling,
                         full_weight=full_weight, continuation=continuation)

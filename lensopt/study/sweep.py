@@ -50,7 +50,7 @@ from lensopt.spec.models import LensSpec
 from lensopt.study.keys import Value, Vary, format_value, set_key
 
 __all__ = ["Settings", "Point", "Task", "SweepEvent", "SweepResult", "expand_grid", "perturbed_spec", "run_task",
-           "manifest", "prepare_outdir", "run_sweep", "best_of", "table", "MANIFEST_VERSION"]
+           "manifest", "prepare_outdir", "check_continuation", "run_sweep", "best_of", "table", "MANIFEST_VERSION"]
 
 MANIFEST_VERSION = 1
 
@@ -408,6 +408,13 @@ def _is_num(v: Any) -> bool:
 # ------------------------------------------------------------------------------------------- run
 
 
+def check_continuation(varies: Sequence[Vary]) -> None:
+    """A continuation walks along exactly one key (else ``LensoptError`` naming ``--continuation``)."""
+    if len(varies) != 1:
+        raise LensoptError("a continuation walks along one key: give one --vary", path="--continuation",
+                           got=[v.key for v in varies])
+
+
 def _continued_spec(outdir: Path, point: Point, points: Sequence[Point], records: dict[tuple[int, int], dict[str, Any]],
                     starts: int) -> tuple[str | None, str]:
     """(the start spec of ``point`` in a continuation as JSON text, "") — point 0: its own spec; point i:
@@ -454,22 +461,22 @@ def run_sweep(spec: LensSpec, spec_text: str, varies: Sequence[Vary], settings: 
         raise LensoptError("must be a finite number ≥ 0", path="--perturb", got=settings.sigma)
     if not any(s.vary for s in spec.surfaces):
         raise LensoptError("nothing to optimize: no surface has a vary list", path="surfaces")
-    if settings.continuation and len(varies) != 1:
-        raise LensoptError("a continuation walks along one key: give one --vary", path="--continuation",
-                           got=[v.key for v in varies])
+    if settings.continuation:
+        check_continuation(varies)
     points = points if points is not None else expand_grid(spec, varies)
     prepare_outdir(outdir, manifest(spec_text, varies, settings), restart=restart)
     records: dict[tuple[int, int], dict[str, Any]] = {}
     n_tasks = len(points) * settings.starts
     result = SweepResult(points, settings, records, [], False, keys=[v.key for v in varies])
-    plans: list[str] = []
+    plans: set[str] = set()
 
     def plan(why: str) -> None:  # said once (a continuation runs its points one after another)
         if on_plan is not None and why not in plans:
             on_plan(why)
-        plans.append(why)
+        plans.add(why)
 
-    def run(tasks: list[Task]) -> None:
+    def run(tasks: list[Task], failed: str = "") -> None:
+        """Run the tasks without a record on disk; with ``failed``, record them as failed for that reason."""
         todo = []
         for t in tasks:
             rec = load_record(outdir, t)
@@ -490,20 +497,19 @@ def run_sweep(spec: LensSpec, spec_text: str, varies: Sequence[Vary], settings: 
             if callback is not None:
                 callback(SweepEvent("done", t.point, t.start, record))
 
+        if failed:
+            for i, t in enumerate(todo):
+                done(i, ({"point": t.point, "start": t.start, "status": "failed", "reason": failed, "wall_s": 0.0},
+                         None))
+            return
         run_tasks(functools.partial(run_task, engine=engine), todo, shared=settings, scheduler=scheduler,
                   workers=workers, on_done=done, on_plan=plan)
 
     try:
         if settings.continuation:
-            for p in points:
+            for p in points:  # nothing to continue from (``why``): the point's starts fail, naming why
                 start_json, why = _continued_spec(outdir, p, points, records, settings.starts)
-                tasks = [Task(p.index, k, start_json or p.spec_json) for k in range(settings.starts)]
-                if why:  # nothing to continue from: the point's starts fail, naming why
-                    for t in tasks:
-                        if load_record(outdir, t) is None:
-                            save_record(outdir, t, {"point": t.point, "start": t.start, "status": "failed",
-                                                    "reason": why, "wall_s": 0.0}, None)
-                run(tasks)
+                run([Task(p.index, k, start_json or p.spec_json) for k in range(settings.starts)], failed=why)
         else:
             run([Task(p.index, k, p.spec_json) for p in points for k in range(settings.starts)])
     except KeyboardInterrupt:
